@@ -1,0 +1,87 @@
+"""msgpack payloads with numpy arrays carried as raw bytes.
+
+An array travels as ``{"__nd__": [dtype, shape, bytes]}``: packing takes a memoryview of the
+array's buffer (no copy for contiguous arrays) and unpacking wraps the received bytes in a
+read-only ``np.frombuffer`` view (no copy either). Every payload is a map with ``"v"``, the schema
+version; anything else is refused with a :class:`MessageError` that says why.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import numpy as np
+
+SCHEMA_VERSION = 1
+MAX_ARRAY_BYTES = 256 * 1024 * 1024
+_ND = "__nd__"
+_ALLOWED_DTYPES = frozenset({"<f4", "<f8", "<i4", "<i8", "<u2", "|u1", "|i1", "<u4"})
+
+
+class MessageError(ValueError):
+    """A payload that cannot be accepted; the message is the reason, for logs and counters."""
+
+
+def _pack_default(obj: object) -> object:
+    if isinstance(obj, np.ndarray):
+        arr = obj if obj.dtype.byteorder != ">" else obj.astype(obj.dtype.newbyteorder("<"))
+        arr = np.ascontiguousarray(arr)
+        return {_ND: [arr.dtype.str, list(arr.shape), memoryview(arr).cast("B")]}
+    if isinstance(obj, np.generic):
+        return obj.item()
+    msg = f"cannot encode {type(obj).__name__}"
+    raise TypeError(msg)
+
+
+def _unpack_hook(obj: dict[Any, Any]) -> object:
+    if _ND not in obj:
+        return obj
+    try:
+        dtype_str, shape, data = obj[_ND]
+    except (TypeError, ValueError) as err:
+        msg = "malformed array: expected [dtype, shape, bytes]"
+        raise MessageError(msg) from err
+    if dtype_str not in _ALLOWED_DTYPES:
+        msg = f"array dtype {dtype_str!r} is not accepted"
+        raise MessageError(msg)
+    if not isinstance(shape, list) or not all(isinstance(d, int) and d >= 0 for d in shape):
+        msg = f"malformed array shape {shape!r}"
+        raise MessageError(msg)
+    if not isinstance(data, bytes):
+        msg = "array data must be bytes"
+        raise MessageError(msg)
+    dtype = np.dtype(dtype_str)
+    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+    if count * dtype.itemsize != len(data) or len(data) > MAX_ARRAY_BYTES:
+        msg = f"array of shape {shape} and dtype {dtype_str} does not match {len(data)} bytes"
+        raise MessageError(msg)
+    return np.frombuffer(data, dtype=dtype).reshape(shape)
+
+
+def encode(message: dict[str, Any]) -> bytes:
+    """Pack a message map, adding the schema version."""
+    return msgpack.packb({"v": SCHEMA_VERSION, **message}, default=_pack_default, use_bin_type=True)
+
+
+def decode(payload: bytes) -> dict[str, Any]:
+    """Unpack a message map and check its schema version.
+
+    Raises:
+        MessageError: not msgpack, not a map, or a missing or unknown version.
+    """
+    try:
+        obj = msgpack.unpackb(payload, object_hook=_unpack_hook, raw=False, strict_map_key=True)
+    except MessageError:
+        raise
+    except Exception as err:  # msgpack raises many types for garbage; all mean the same here
+        msg = f"not a msgpack payload ({type(err).__name__}: {err})"
+        raise MessageError(msg) from err
+    if not isinstance(obj, dict):
+        msg = f"payload is a {type(obj).__name__}, not a map"
+        raise MessageError(msg)
+    version = obj.get("v")
+    if version != SCHEMA_VERSION:
+        msg = f"unsupported schema version {version!r} (this build speaks v{SCHEMA_VERSION})"
+        raise MessageError(msg)
+    return obj

@@ -1,0 +1,73 @@
+"""The per-wall EKF: innovation, association score and update.
+
+The paper scores an observation against a wall with a Gaussian of the *wall's* covariance alone.
+That is wrong twice over: a wall seen a hundred times has a tiny covariance, so a good new
+observation (with its own, larger, noise) looks impossible and starts a duplicate wall; and the
+score ignores how pose error moves the observation. Association must use the innovation
+covariance ``S = H P H^T + R + J Q J^T`` (wall, measurement and pose uncertainty together). The
+most likely wall is the one with the highest Gaussian log-likelihood of its innovation under S,
+among those whose Mahalanobis distance passes a chi-square gate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common import wall_model
+
+Array = NDArray[np.float64]
+
+CHI2_2DOF_999 = 13.815510557964274  # 99.9 % gate of a chi-square with 2 degrees of freedom
+
+
+@dataclass(frozen=True)
+class Innovation:
+    """An observation compared with a wall's prediction.
+
+    Attributes:
+        residual: observation minus prediction (2,).
+        cov: innovation covariance S (2x2).
+        jacobian: d prediction / d state (2x2), kept for the update.
+        mahalanobis2: squared Mahalanobis distance of the residual under S.
+        log_likelihood: Gaussian log-density of the residual under S.
+    """
+
+    residual: Array
+    cov: Array
+    jacobian: Array
+    mahalanobis2: float
+    log_likelihood: float
+
+
+def innovation(
+    s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array
+) -> Innovation:
+    """Compare observation ``z`` (covariance ``r``) seen from ``pose`` with wall state ``s, p``."""
+    h = wall_model.jacobian_state(s, anchor, pose)
+    hp = wall_model.jacobian_pose(s, anchor, pose)
+    cov = h @ p @ h.T + r + hp @ pose_cov @ hp.T
+    residual = z - wall_model.predict(s, anchor, pose)
+    m2 = float(residual @ np.linalg.solve(cov, residual))
+    log_det = float(np.log(np.linalg.det(cov)))
+    return Innovation(residual, cov, h, m2, -0.5 * (m2 + log_det) - np.log(2.0 * np.pi))
+
+
+def update(s: Array, p: Array, innov: Innovation) -> tuple[Array, Array]:
+    """EKF update in Joseph form, which keeps P symmetric and positive for tiny covariances."""
+    h = innov.jacobian
+    gain = p @ h.T @ np.linalg.inv(innov.cov)
+    s_new = s + gain @ innov.residual
+    i_kh = np.eye(2) - gain @ h
+    r_eff = innov.cov - h @ p @ h.T  # the measurement and pose part of S
+    p_new = i_kh @ p @ i_kh.T + gain @ r_eff @ gain.T
+    return s_new, 0.5 * (p_new + p_new.T)
+
+
+def initial_state(z: Array, r: Array, pose: Array, pose_cov: Array) -> tuple[Array, Array, Array]:
+    """A new wall from one observation: ``(s, P, anchor)``."""
+    s, anchor, ds_dz, ds_dpose = wall_model.from_observation(z, pose)
+    p = ds_dz @ r @ ds_dz.T + ds_dpose @ pose_cov @ ds_dpose.T
+    return s, 0.5 * (p + p.T), anchor

@@ -1,0 +1,321 @@
+"""The messages the services exchange, with validation on the way in.
+
+Each type converts to a plain map for :func:`wallmap.common.codec.encode` and back with
+``from_map``, which refuses anything malformed or non-finite with a
+:class:`~wallmap.common.codec.MessageError` naming the field. Keys and payloads are documented in
+``docs/protocol.md``; ``Pose`` is the contract's ``{prefix}/pose``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common.codec import MessageError, decode, encode
+
+Array = NDArray[np.float64]
+
+
+def _get(m: dict[str, Any], key: str) -> Any:
+    if key not in m:
+        msg = f"missing field {key!r}"
+        raise MessageError(msg)
+    return m[key]
+
+
+def _finite(m: dict[str, Any], key: str) -> float:
+    value = _get(m, key)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        msg = f"field {key!r} must be a number, got {type(value).__name__}"
+        raise MessageError(msg)
+    if not math.isfinite(value):
+        msg = f"field {key!r} is not finite ({value})"
+        raise MessageError(msg)
+    return float(value)
+
+
+def _int(m: dict[str, Any], key: str) -> int:
+    value = _get(m, key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        msg = f"field {key!r} must be an integer"
+        raise MessageError(msg)
+    return value
+
+
+def _str(m: dict[str, Any], key: str, default: str | None = None) -> str:
+    value = m.get(key, default)
+    if not isinstance(value, str):
+        msg = f"field {key!r} must be a string"
+        raise MessageError(msg)
+    return value
+
+
+def _matrix(value: Any, shape: tuple[int, ...], key: str) -> Array:
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        msg = f"field {key!r} must be a numeric array of shape {shape}"
+        raise MessageError(msg) from err
+    if arr.shape != shape:
+        msg = f"field {key!r} has shape {arr.shape}, expected {shape}"
+        raise MessageError(msg)
+    if not np.isfinite(arr).all():
+        msg = f"field {key!r} holds non-finite numbers"
+        raise MessageError(msg)
+    return arr
+
+
+def _covariance(value: Any, n: int, key: str) -> Array:
+    cov = _matrix(value, (n, n), key)
+    if not np.allclose(cov, cov.T, atol=1e-12 + 1e-9 * np.abs(cov).max()):
+        msg = f"field {key!r} is not symmetric"
+        raise MessageError(msg)
+    if np.linalg.eigvalsh(cov).min() < -1e-12:
+        msg = f"field {key!r} is not positive semi-definite"
+        raise MessageError(msg)
+    return cov
+
+
+def _require_map(m: object) -> dict[str, Any]:
+    if not isinstance(m, dict):
+        msg = f"expected a map, got {type(m).__name__}"
+        raise MessageError(msg)
+    return m
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A robot pose in the map frame: the contract's ``{prefix}/pose``."""
+
+    stamp: float
+    x: float
+    y: float
+    yaw: float
+    cov: Array | None = None
+    frame: str = "map"
+    child: str = "base_link"
+
+    @property
+    def vector(self) -> Array:
+        """(x, y, yaw) as an array."""
+        return np.array([self.x, self.y, self.yaw])
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        m: dict[str, Any] = {
+            "stamp": self.stamp,
+            "frame": self.frame,
+            "child": self.child,
+            "x": self.x,
+            "y": self.y,
+            "yaw": self.yaw,
+        }
+        if self.cov is not None:
+            m["cov"] = self.cov.tolist()
+        return m
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> Pose:
+        """Validate and build; raises MessageError."""
+        m = _require_map(m)
+        cov = m.get("cov")
+        return cls(
+            stamp=_finite(m, "stamp"),
+            x=_finite(m, "x"),
+            y=_finite(m, "y"),
+            yaw=_finite(m, "yaw"),
+            cov=None if cov is None else _covariance(cov, 3, "cov"),
+            frame=_str(m, "frame", "map"),
+            child=_str(m, "child", "base_link"),
+        )
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One sensor frame: an organized cloud (h, w, 3) in the sensor frame and the sensor's mount.
+
+    ``run`` names the player run and ``seq`` numbers its frames from 0, so the mapper can
+    acknowledge them and a player in ``--fast`` mode can wait.
+    """
+
+    run: str
+    seq: int
+    stamp: float
+    frame_id: str
+    points: NDArray[np.float32]
+    base_from_sensor: Array
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding (the points go as raw bytes)."""
+        return {
+            "run": self.run,
+            "seq": self.seq,
+            "stamp": self.stamp,
+            "frame_id": self.frame_id,
+            "points": self.points,
+            "base_from_sensor": self.base_from_sensor,
+        }
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> Frame:
+        """Validate and build; raises MessageError."""
+        m = _require_map(m)
+        points = _get(m, "points")
+        if not isinstance(points, np.ndarray) or points.dtype != np.float32:
+            msg = "field 'points' must be a float32 array"
+            raise MessageError(msg)
+        if points.ndim != 3 or points.shape[2] != 3 or points.shape[0] * points.shape[1] == 0:
+            msg = f"field 'points' must have shape (rows, columns, 3), got {points.shape}"
+            raise MessageError(msg)
+        return cls(
+            run=_str(m, "run"),
+            seq=_int(m, "seq"),
+            stamp=_finite(m, "stamp"),
+            frame_id=_str(m, "frame_id"),
+            points=points,
+            base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
+        )
+
+
+@dataclass(frozen=True)
+class WallObservation:
+    """A wall seen in one frame, in the robot's base frame.
+
+    ``closest`` is the paper's (u, v): the closest point of the wall's line to the robot.
+    """
+
+    closest: Array
+    cov: Array
+    p0: Array
+    p1: Array
+    n_points: int
+    rms: float
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "u": float(self.closest[0]),
+            "v": float(self.closest[1]),
+            "cov": self.cov.tolist(),
+            "p0": self.p0.tolist(),
+            "p1": self.p1.tolist(),
+            "n_points": self.n_points,
+            "rms": self.rms,
+        }
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> WallObservation:
+        """Validate and build; raises MessageError."""
+        m = _require_map(m)
+        closest = np.array([_finite(m, "u"), _finite(m, "v")])
+        if closest @ closest < 1e-6:
+            msg = "wall passes through the sensor (u = v = 0)"
+            raise MessageError(msg)
+        cov = _covariance(_get(m, "cov"), 2, "cov")
+        if np.linalg.det(cov) <= 0.0:
+            msg = "field 'cov' is singular"
+            raise MessageError(msg)
+        return cls(
+            closest=closest,
+            cov=cov,
+            p0=_matrix(_get(m, "p0"), (2,), "p0"),
+            p1=_matrix(_get(m, "p1"), (2,), "p1"),
+            n_points=_int(m, "n_points"),
+            rms=_finite(m, "rms"),
+        )
+
+
+@dataclass(frozen=True)
+class Observations:
+    """The detector's output for one frame, also when it found no wall."""
+
+    run: str
+    seq: int
+    stamp: float
+    frame: str
+    walls: list[WallObservation] = field(default_factory=list)
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "run": self.run,
+            "seq": self.seq,
+            "stamp": self.stamp,
+            "frame": self.frame,
+            "walls": [w.to_map() for w in self.walls],
+        }
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> Observations:
+        """Validate and build; raises MessageError."""
+        m = _require_map(m)
+        walls = _get(m, "walls")
+        if not isinstance(walls, list):
+            msg = "field 'walls' must be a list"
+            raise MessageError(msg)
+        return cls(
+            run=_str(m, "run"),
+            seq=_int(m, "seq"),
+            stamp=_finite(m, "stamp"),
+            frame=_str(m, "frame", "base_link"),
+            walls=[WallObservation.from_map(w) for w in walls],
+        )
+
+
+@dataclass(frozen=True)
+class Progress:
+    """The mapper's acknowledgement of one player run: frames processed so far."""
+
+    run: str
+    processed: int
+    integrated: int
+    dropped: int
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "run": self.run,
+            "processed": self.processed,
+            "integrated": self.integrated,
+            "dropped": self.dropped,
+        }
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> Progress:
+        """Validate and build; raises MessageError."""
+        m = _require_map(m)
+        return cls(
+            run=_str(m, "run"),
+            processed=_int(m, "processed"),
+            integrated=_int(m, "integrated"),
+            dropped=_int(m, "dropped"),
+        )
+
+
+def pack(message: Pose | Frame | Observations | Progress) -> bytes:
+    """Encode any message."""
+    return encode(message.to_map())
+
+
+def unpack_pose(payload: bytes) -> Pose:
+    """Decode and validate a pose."""
+    return Pose.from_map(decode(payload))
+
+
+def unpack_frame(payload: bytes) -> Frame:
+    """Decode and validate a sensor frame."""
+    return Frame.from_map(decode(payload))
+
+
+def unpack_observations(payload: bytes) -> Observations:
+    """Decode and validate a detector output."""
+    return Observations.from_map(decode(payload))
+
+
+def unpack_progress(payload: bytes) -> Progress:
+    """Decode and validate a mapper acknowledgement."""
+    return Progress.from_map(decode(payload))

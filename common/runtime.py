@@ -1,0 +1,70 @@
+"""What every long-running service needs: logging, counters of refused input, clean shutdown."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+import time
+from collections import Counter
+from types import FrameType
+
+import zenoh
+
+log = logging.getLogger("wallmap")
+
+
+def setup_logging(service: str) -> logging.Logger:
+    """Log lines of ``time level service: message`` to stderr, level from ``WALLMAP_LOG``."""
+    level = os.environ.get("WALLMAP_LOG", "INFO").upper()
+    logging.basicConfig(
+        level=level if level in logging.getLevelNamesMapping() else "INFO",
+        format=f"%(asctime)s %(levelname)s {service}: %(message)s",
+    )
+    zenoh.init_log_from_env_or("error")
+    return logging.getLogger(f"wallmap.{service}")
+
+
+class Stats:
+    """Thread-safe counters, with refusals logged by reason (at most once a second per reason)."""
+
+    def __init__(self, logger: logging.Logger) -> None:
+        self._counts: Counter[str] = Counter()
+        self._lock = threading.Lock()
+        self._log = logger
+        self._last_logged: dict[str, float] = {}
+
+    def add(self, name: str, n: int = 1) -> None:
+        """Count ``n`` events of kind ``name``."""
+        with self._lock:
+            self._counts[name] += n
+
+    def refuse(self, what: str, reason: str) -> None:
+        """Count and log a refused message; the service carries on."""
+        with self._lock:
+            self._counts["refused"] += 1
+            self._counts[f"refused.{what}"] += 1
+            now = time.monotonic()
+            quiet = now - self._last_logged.get(reason, -1e9) < 1.0
+            if not quiet:
+                self._last_logged[reason] = now
+        if not quiet:
+            self._log.warning("refused %s: %s", what, reason)
+
+    def snapshot(self) -> dict[str, int]:
+        """A copy of all counters."""
+        with self._lock:
+            return dict(self._counts)
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM, so services shut down and save their state."""
+    stop = threading.Event()
+
+    def handler(_signum: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop

@@ -1,0 +1,155 @@
+"""Zenoh sessions from one set of flags, and the key space.
+
+Every subcommand that talks Zenoh takes the same flags (``--connect``, ``--prefix``,
+``--zenoh-config``; env ``WALLMAP_CONNECT``, ``WALLMAP_PREFIX``). The config file is applied first
+and the flags override it. Multicast scouting is off unless that file turns it on, so nothing
+joins a stranger's network by accident.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+DEFAULT_PREFIX = "wallmap"
+
+
+class TransportError(RuntimeError):
+    """The session could not be opened; the message says why, in one line."""
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    """Where and how to connect.
+
+    Attributes:
+        connect: endpoints of routers (or peers) to connect to.
+        prefix: first key segment(s) of every key, so several robots can share a network.
+        config_file: a Zenoh json5 config applied before the flags.
+        wait_for_router: seconds to keep trying to reach the router at start: ``inf`` for
+            services (they may start before their router), a few seconds for commands a person
+            runs, 0 to fail at once.
+    """
+
+    connect: tuple[str, ...] = (DEFAULT_CONNECT,)
+    prefix: str = DEFAULT_PREFIX
+    config_file: Path | None = None
+    wait_for_router: float = 0.0
+
+
+def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the contract's Zenoh flags to a subcommand."""
+    group = parser.add_argument_group("zenoh")
+    group.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"router endpoint, repeatable (default {DEFAULT_CONNECT}; env WALLMAP_CONNECT)",
+    )
+    group.add_argument(
+        "--prefix", metavar="PREFIX", help="key prefix (default wallmap; env WALLMAP_PREFIX)"
+    )
+    group.add_argument(
+        "--zenoh-config", type=Path, metavar="FILE", help="Zenoh json5 config applied first"
+    )
+
+
+def settings_from_args(args: argparse.Namespace, *, wait_for_router: float) -> ZenohSettings:
+    """Resolve flags, then environment, then defaults."""
+    connect = args.connect
+    if not connect:
+        env = os.environ.get("WALLMAP_CONNECT", "")
+        connect = [e.strip() for e in env.split(",") if e.strip()] or [DEFAULT_CONNECT]
+    prefix = (args.prefix or os.environ.get("WALLMAP_PREFIX") or DEFAULT_PREFIX).strip("/")
+    if not prefix or any(c in prefix for c in "*$?#"):
+        msg = f"invalid --prefix {prefix!r}: it must be a plain key expression such as robot1/run2"
+        raise TransportError(msg)
+    return ZenohSettings(tuple(connect), prefix, args.zenoh_config, wait_for_router)
+
+
+def make_config(
+    settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
+) -> zenoh.Config:
+    """Build the Zenoh config: file first, then what the flags say."""
+    if settings.config_file is not None:
+        if not settings.config_file.is_file():
+            msg = f"zenoh config {settings.config_file} does not exist"
+            raise TransportError(msg)
+        try:
+            conf = zenoh.Config.from_file(str(settings.config_file))
+        except zenoh.ZError as err:
+            msg = f"zenoh config {settings.config_file} is invalid: {err}"
+            raise TransportError(msg) from err
+        # Zenoh's default turns multicast on: keep it off unless the file speaks of it.
+        if "multicast" not in settings.config_file.read_text(encoding="utf-8"):
+            conf.insert_json5("scouting/multicast/enabled", "false")
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("mode", json.dumps(mode))
+    if mode == "router":
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    else:
+        conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+        if settings.wait_for_router:
+            wait = settings.wait_for_router
+            timeout_ms = -1 if math.isinf(wait) else round(wait * 1000)
+            conf.insert_json5("connect/timeout_ms", str(timeout_ms))
+    return conf
+
+
+def open_session(
+    settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
+) -> zenoh.Session:
+    """Open a session, turning Zenoh's errors into one readable line."""
+    conf = make_config(settings, mode=mode, listen=listen)
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as err:
+        where = ", ".join(listen if mode == "router" else settings.connect)
+        verb = "listen on" if mode == "router" else "reach a Zenoh router at"
+        msg = f"cannot {verb} {where} ({err})"
+        raise TransportError(msg) from err
+
+
+@dataclass(frozen=True)
+class Keys:
+    """The key expressions under one prefix (see docs/protocol.md)."""
+
+    prefix: str = DEFAULT_PREFIX
+
+    @property
+    def frames(self) -> str:
+        """Sensor frames, player -> detector."""
+        return f"{self.prefix}/sensor/frames"
+
+    @property
+    def pose(self) -> str:
+        """Robot poses in the map frame (the contract's pose key)."""
+        return f"{self.prefix}/pose"
+
+    @property
+    def observations(self) -> str:
+        """Wall observations, detector -> mapper."""
+        return f"{self.prefix}/walls/observations"
+
+    @property
+    def map_walls(self) -> str:
+        """Queryable: the current wall map (the contract's map key)."""
+        return f"{self.prefix}/map/walls"
+
+    @property
+    def progress(self) -> str:
+        """Mapper acknowledgements of the frames of each player run."""
+        return f"{self.prefix}/mapper/progress"
+
+    def health(self, service: str = "*") -> str:
+        """Liveliness token of a running service."""
+        return f"{self.prefix}/health/{service}"

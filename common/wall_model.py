@@ -1,0 +1,109 @@
+"""The measurement model of a wall seen from a robot pose, and its Jacobians.
+
+A wall is an infinite 2-D line. The paper parameterises it by its closest point (u, v) to the
+origin and, in its equations 1-3, predicts what the robot sees by moving (u, v) into the robot
+frame as if it were a *point*: ``R(yaw)^T ((u, v) - t)``. That is wrong for a line: when the robot
+translates along the wall, the closest point of the wall *to the robot* slides with it, while the
+transformed point does not. A filter built on the point model sees a large innovation after every
+metre driven along a wall and starts a new wall each time.
+
+The right model. Let the line be ``{p : n . p = rho}`` with unit normal ``n``. Seen from a robot at
+``t`` with heading ``yaw``, its closest point is the foot of the perpendicular from ``t``::
+
+    z = R(yaw)^T (rho - n . t) n
+
+Every function here works with the line stored as its closest point ``s`` to an *anchor* ``a``
+(the robot position when the wall was first seen), not to the map origin. The closest point to
+the map origin is singular for a line through the origin (its direction is lost when (u, v) = 0);
+the anchor is never on the wall because a sensor cannot see a wall it stands in. With
+``d = t - a`` and ``k = 1 - (s . d) / |s|^2`` the model is ``z = k R^T s``.
+
+All functions are pure and take plain numpy arrays: ``s``, ``anchor`` and ``z`` are shape (2,),
+``pose`` is (x, y, yaw).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+_PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # rotates a vector by +90 degrees
+
+
+def rotation(yaw: float) -> Array:
+    """Return the 2-D rotation matrix of ``yaw`` radians."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def predict(s: Array, anchor: Array, pose: Array) -> Array:
+    """Closest point of the wall to the robot, in the robot frame (the detector's (u, v))."""
+    d = pose[:2] - anchor
+    k = 1.0 - (s @ d) / (s @ s)
+    return k * (rotation(pose[2]).T @ s)
+
+
+def jacobian_state(s: Array, anchor: Array, pose: Array) -> Array:
+    """Jacobian of :func:`predict` with respect to the state ``s``, 2x2."""
+    d = pose[:2] - anchor
+    rho2 = s @ s
+    k = 1.0 - (s @ d) / rho2
+    grad_k = -d / rho2 + 2.0 * (s @ d) * s / rho2**2
+    return rotation(pose[2]).T @ (k * np.eye(2) + np.outer(s, grad_k))
+
+
+def jacobian_pose(s: Array, anchor: Array, pose: Array) -> Array:
+    """Jacobian of :func:`predict` with respect to the pose (x, y, yaw), 2x3.
+
+    It says how pose error moves the observation, so pose uncertainty can enter the gate.
+    """
+    d = pose[:2] - anchor
+    rho2 = s @ s
+    k = 1.0 - (s @ d) / rho2
+    rt = rotation(pose[2]).T
+    d_translation = -rt @ np.outer(s, s) / rho2
+    d_yaw = k * (-_PERP @ rt) @ s  # d(R^T)/d yaw = -PERP R^T
+    return np.column_stack([d_translation, d_yaw])
+
+
+def from_observation(z: Array, pose: Array) -> tuple[Array, Array, Array, Array]:
+    """Start a wall from one observation: the inverse of :func:`predict`.
+
+    The anchor is the robot position, so the state is the observation rotated into the map.
+
+    Returns:
+        ``(s, anchor, ds_dz, ds_dpose)``: the state, its anchor and the Jacobians of the state with
+        respect to the observation (2x2) and to the pose (2x3), to build its first covariance.
+    """
+    r = rotation(pose[2])
+    s = r @ z
+    anchor = np.array(pose[:2], dtype=float)
+    n = s / np.linalg.norm(s)
+    ds_dpose = np.column_stack([np.outer(n, n), _PERP @ s])
+    return s, anchor, r, ds_dpose
+
+
+def to_map_frame(s: Array, anchor: Array) -> tuple[Array, Array]:
+    """The wall's closest point to the map origin, (u, v), and d(u, v)/d s.
+
+    This is the paper's parameterisation, served to users; near a line through the origin the
+    Jacobian (and so the reported covariance) grows without bound, as that parameterisation does.
+    """
+    rho = np.linalg.norm(s)
+    n = s / rho
+    offset = n @ anchor + rho
+    proj = (np.eye(2) - np.outer(n, n)) / rho  # d n / d s
+    jac = np.outer(n, anchor @ proj + n) + offset * proj
+    return offset * n, jac
+
+
+def direction(s: Array) -> Array:
+    """Unit vector along the wall (the normal turned by +90 degrees)."""
+    return _PERP @ (s / np.linalg.norm(s))
+
+
+def foot(s: Array, anchor: Array) -> Array:
+    """The wall's closest point to its anchor, in the map frame: the origin of its extent axis."""
+    return anchor + s

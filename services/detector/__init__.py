@@ -1,0 +1,1 @@
+"""The detector: finds walls in one row of each sensor frame."""

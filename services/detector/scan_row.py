@@ -1,0 +1,71 @@
+"""From an organized cloud to one scan row of 2-D points in the robot's base frame.
+
+The paper takes one fixed upper row of the image, to look over furniture. Two things go wrong
+with a fixed row: far away it climbs onto the ceiling, and a ceiling (or floor) seen by one image
+row is itself a straight line in 2-D, so it comes out as a phantom wall; and its height depends on
+the camera's tilt. The default here is a *height band* in the base frame instead: per image
+column, the point whose height is nearest the middle of the band, which keeps above furniture and
+below the ceiling at every range and any tilt. Walls are vertical, so every point on a wall, at
+any height, projects onto the wall's 2-D line. ``docs/detector.md`` compares the two on generated
+scenes.
+
+A frame with a single row is a 2-D scanner's scan and is used as it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RowSelection:
+    """How the scan row is chosen.
+
+    Attributes:
+        mode: ``band`` (a height band in the base frame) or ``row`` (one fixed image row).
+        band: lowest and highest height of the band (m, base frame).
+        row_fraction: for ``row`` mode, the row as a fraction of the image height from the top.
+    """
+
+    mode: Literal["band", "row"] = "band"
+    band: tuple[float, float] = (1.3, 2.1)
+    row_fraction: float = 0.25
+
+
+def _to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
+    xy = points.astype(np.float64) @ base_from_sensor[:2, :3].T + base_from_sensor[:2, 3]
+    xy[~np.isfinite(xy).all(axis=-1)] = np.nan
+    return xy
+
+
+def band_scan(
+    points: NDArray[np.float32], base_from_sensor: Array, band: tuple[float, float]
+) -> Array:
+    """Per column, the point nearest the middle of the height band, as (x, y); NaN where none."""
+    low, high = band
+    height = points @ base_from_sensor[2, :3].astype(np.float32) + np.float32(
+        base_from_sensor[2, 3]
+    )
+    inside = (height >= low) & (height <= high)  # NaN compares False
+    cost = np.where(inside, np.abs(height - 0.5 * (low + high)), np.inf)
+    best = np.argmin(cost, axis=0)
+    columns = np.arange(points.shape[1])
+    xy = _to_base_xy(points[best, columns], base_from_sensor)
+    xy[~inside[best, columns]] = np.nan
+    return xy
+
+
+def select_scan(points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection) -> Array:
+    """The scan row (columns x 2, base frame, NaN for no point) chosen from an organized cloud."""
+    if points.shape[0] == 1:
+        return _to_base_xy(points[0], base_from_sensor)
+    if how.mode == "row":
+        row = round(how.row_fraction * (points.shape[0] - 1))
+        return _to_base_xy(points[row], base_from_sensor)
+    return band_scan(points, base_from_sensor, how.band)

@@ -1,0 +1,72 @@
+"""The detector service: sensor frames in over Zenoh, wall observations out.
+
+Frames arrive through a bounded FIFO channel that the service's own thread drains; when the
+detector falls behind, the channel fills and Zenoh pushes back on the publisher (the observations
+are sent with congestion control BLOCK), so under ``wallmap player --fast`` no frame is lost.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import zenoh
+
+from wallmap.common.codec import MessageError
+from wallmap.common.messages import pack, unpack_frame
+from wallmap.common.runtime import Stats, setup_logging
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.services.detector.detector import DetectorConfig, WallDetector
+
+QUEUE_DEPTH = 8
+
+
+def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) -> Stats:
+    """Run until ``stop`` is set; returns the counters."""
+    log = setup_logging("detector")
+    keys = Keys(settings.prefix)
+    stats = Stats(log)
+    detector = WallDetector(config)
+    log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
+    with open_session(settings) as session:
+        publisher = session.declare_publisher(
+            keys.observations, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        subscriber = session.declare_subscriber(
+            keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
+        )
+        token = session.liveliness().declare_token(keys.health("detector"))
+        worker = threading.Thread(
+            target=_work, args=(subscriber.handler, detector, publisher, stats), daemon=True
+        )
+        worker.start()
+        log.info("ready: %s -> %s (rows: %s)", keys.frames, keys.observations, config.rows)
+        stop.wait()
+        log.info("stopping: %s", stats.snapshot())
+        token.undeclare()
+        subscriber.undeclare()
+        worker.join(timeout=5.0)
+    return stats
+
+
+def _work(
+    channel: zenoh.handlers.Handler[zenoh.Sample],
+    detector: WallDetector,
+    publisher: zenoh.Publisher,
+    stats: Stats,
+) -> None:
+    """Drain the frame channel until the subscriber is undeclared."""
+    while True:
+        try:
+            sample = channel.recv()
+        except zenoh.ZError:
+            return
+        stats.add("received")
+        try:
+            frame = unpack_frame(sample.payload.to_bytes())
+        except MessageError as err:
+            stats.refuse("frame", str(err))
+            continue
+        observations = detector.detect(frame)
+        publisher.put(pack(observations))
+        stats.add("published")
+        stats.add("walls", len(observations.walls))

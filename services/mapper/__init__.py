@@ -1,0 +1,1 @@
+"""The mapper: one EKF per wall, served as a Zenoh queryable."""

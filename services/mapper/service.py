@@ -1,0 +1,246 @@
+"""The mapper service: poses and wall observations in, the wall map served as a queryable.
+
+Three worker threads, each draining one Zenoh channel (no work is done in Zenoh's callbacks):
+poses go into the pose buffer; observations wait for a pose that covers their stamp (in arrival
+order, for at most ``pose_wait`` seconds) and are folded into the map; queries get a snapshot.
+After each batch of observations the mapper acknowledges each player run's frames on the
+progress key, which is how ``wallmap player --fast`` knows how far ahead it may publish. The main
+thread saves the state file every few seconds and on shutdown.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+from wallmap.common.codec import MessageError, encode
+from wallmap.common.messages import Observations, Progress, pack, unpack_observations, unpack_pose
+from wallmap.common.runtime import Stats, setup_logging
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.services.mapper import state_file
+from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
+from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+
+QUEUE_DEPTH = 64
+MAX_PENDING = 512
+MAX_RUNS = 16
+ACK_EVERY = 8  # frames between acknowledgements while busy
+
+
+@dataclass(frozen=True)
+class MapperSettings:
+    """How the mapper service runs (the map's own tuning is in ``MapperConfig``).
+
+    Attributes:
+        state: file the map is kept in across restarts, or None.
+        pose_key: key expression the poses come from (default: the prefix's pose key).
+        pose_wait: longest an observation waits for its pose (s, wall clock).
+        save_every: seconds between state saves while the map changes.
+    """
+
+    state: Path | None = None
+    pose_key: str | None = None
+    pose_wait: float = 5.0
+    save_every: float = 2.0
+    map: MapperConfig = field(default_factory=MapperConfig)
+    poses: PoseBufferConfig = field(default_factory=PoseBufferConfig)
+
+
+class MapperCore:
+    """The map, the pose buffer and per-run counters behind one lock, shared by the workers."""
+
+    def __init__(self, wall_map: WallMap, poses: PoseBuffer, stats: Stats) -> None:
+        self.map = wall_map
+        self.poses = poses
+        self.stats = stats
+        self.lock = threading.Condition()
+        self.dirty = False
+        self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict()
+
+    def count(self, run: str, *, integrated: bool) -> Progress:
+        """Record one processed frame of a run; returns the run's new progress."""
+        old = self.runs.pop(run, Progress(run, 0, 0, 0))
+        new = Progress(
+            run,
+            old.processed + 1,
+            old.integrated + int(integrated),
+            old.dropped + int(not integrated),
+        )
+        self.runs[run] = new
+        while len(self.runs) > MAX_RUNS:
+            self.runs.popitem(last=False)
+        return new
+
+    def reply(self, min_obs: int, *, trajectory: bool) -> dict[str, object]:
+        """The map reply plus the mapper's counters."""
+        with self.lock:
+            body = self.map.reply(min_obs=min_obs, trajectory=trajectory)
+            counts = self.stats.snapshot()
+        body["dropped"] = counts.get("dropped", 0)
+        body["refused"] = counts.get("refused", 0)
+        return body
+
+
+def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) -> Stats:
+    """Run until ``stop`` is set, then save the state; returns the counters."""
+    log = setup_logging("mapper")
+    keys = Keys(settings.prefix)
+    stats = Stats(log)
+    wall_map = state_file.load(mapper.state, mapper.map) if mapper.state else WallMap(mapper.map)
+    if wall_map.walls:
+        log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
+    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats)
+    pose_key = mapper.pose_key or keys.pose
+    log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
+    with open_session(settings) as session:
+        progress = session.declare_publisher(keys.progress)
+        pose_sub = session.declare_subscriber(pose_key, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
+        obs_sub = session.declare_subscriber(
+            keys.observations, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
+        )
+        queryable = session.declare_queryable(keys.map_walls)
+        workers = [
+            threading.Thread(target=_poses, args=(pose_sub.handler, core), daemon=True),
+            threading.Thread(
+                target=_observations,
+                args=(obs_sub.handler, core, progress, mapper.pose_wait),
+                daemon=True,
+            ),
+            threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
+        ]
+        for worker in workers:
+            worker.start()
+        token = session.liveliness().declare_token(keys.health("mapper"))
+        log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
+        while not stop.wait(mapper.save_every):
+            _save(core, mapper.state)
+        log.info("stopping: %s", stats.snapshot())
+        token.undeclare()
+        for entity in (pose_sub, obs_sub, queryable):
+            entity.undeclare()
+        for worker in workers:
+            worker.join(timeout=5.0)
+    _save(core, mapper.state)
+    return stats
+
+
+def _save(core: MapperCore, path: Path | None) -> None:
+    if path is None:
+        return
+    with core.lock:
+        if not core.dirty:
+            return
+        document = state_file.to_json(core.map)
+        core.dirty = False
+    state_file.write(path, document)
+
+
+def _poses(channel: zenoh.handlers.Handler[zenoh.Sample], core: MapperCore) -> None:
+    while True:
+        try:
+            sample = channel.recv()
+        except zenoh.ZError:
+            return
+        try:
+            pose = unpack_pose(sample.payload.to_bytes())
+        except MessageError as err:
+            core.stats.refuse("pose", str(err))
+            continue
+        with core.lock:
+            core.poses.add(pose)
+            core.lock.notify_all()
+        core.stats.add("poses")
+
+
+def _observations(
+    channel: zenoh.handlers.Handler[zenoh.Sample],
+    core: MapperCore,
+    progress: zenoh.Publisher,
+    pose_wait: float,
+) -> None:
+    """Fold observations into the map in arrival order, each once its pose is known."""
+    pending: collections.deque[tuple[float, Observations]] = collections.deque()
+    acks: dict[str, Progress] = {}
+    while True:
+        try:
+            if not pending:
+                _flush(acks, progress)  # idle: tell the players where we are
+                sample = channel.recv()
+            else:
+                sample = channel.try_recv() if len(pending) < MAX_PENDING else None
+        except zenoh.ZError:
+            return
+        if sample is not None:
+            try:
+                pending.append((time.monotonic(), unpack_observations(sample.payload.to_bytes())))
+            except MessageError as err:
+                core.stats.refuse("observations", str(err))
+        while pending and _process_head(pending, core, pose_wait, acks):
+            pass
+        if sum(a.processed for a in acks.values()) % ACK_EVERY == 0:
+            _flush(acks, progress)
+
+
+def _flush(acks: dict[str, Progress], progress: zenoh.Publisher) -> None:
+    for ack in acks.values():
+        progress.put(pack(ack))
+    acks.clear()
+
+
+def _process_head(
+    pending: collections.deque[tuple[float, Observations]],
+    core: MapperCore,
+    pose_wait: float,
+    acks: dict[str, Progress],
+) -> bool:
+    """Integrate or drop the oldest pending observation; False when it must wait longer."""
+    arrived, obs = pending[0]
+    with core.lock:
+        pose = core.poses.lookup(obs.stamp)
+        if pose is Lookup.WAIT and time.monotonic() - arrived < pose_wait:
+            core.lock.wait(timeout=0.05)
+            return False
+        pending.popleft()
+        integrated = not isinstance(pose, Lookup)
+        if integrated:
+            core.map.integrate(obs, pose)
+            core.dirty = True
+        acks[obs.run] = core.count(obs.run, integrated=integrated)
+    if integrated:
+        core.stats.add("integrated")
+    else:
+        core.stats.add("dropped")
+        core.stats.add(f"dropped.{pose.value}")
+    return True
+
+
+def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> None:
+    while True:
+        try:
+            query = channel.recv()
+        except zenoh.ZError:
+            return
+        with query:
+            params = query.parameters
+            try:
+                min_obs = int(params.get("min_obs") or 1)
+            except ValueError:
+                query.reply_err(f"min_obs must be an integer, got {params.get('min_obs')!r}")
+                continue
+            fmt = params.get("format") or "msgpack"
+            if fmt not in ("msgpack", "json"):
+                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+                continue
+            body = core.reply(min_obs, trajectory=params.get("trajectory") == "true")
+            if fmt == "json":
+                payload = json.dumps({"v": 1, **body}).encode()
+                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            else:
+                query.reply(query.key_expr, encode(body))
+        core.stats.add("queries")

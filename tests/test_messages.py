@@ -1,0 +1,140 @@
+"""The codec and message validation: round trips, zero copies, and every refusal has a reason."""
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wallmap.common import codec
+from wallmap.common.codec import MessageError
+from wallmap.common.messages import (
+    Frame,
+    Observations,
+    Pose,
+    WallObservation,
+    pack,
+    unpack_frame,
+    unpack_observations,
+    unpack_pose,
+)
+
+
+def make_frame(points=None):
+    if points is None:
+        points = np.arange(2 * 4 * 3, dtype=np.float32).reshape(2, 4, 3)
+    return Frame("run1", 7, 12.5, "camera", points, np.eye(4))
+
+
+def test_frame_round_trip_is_exact_and_does_not_copy_the_points():
+    frame = make_frame()
+    back = unpack_frame(pack(frame))
+    np.testing.assert_array_equal(back.points, frame.points)
+    assert not back.points.flags.owndata  # a view over the received bytes
+    assert (back.run, back.seq, back.stamp, back.frame_id) == ("run1", 7, 12.5, "camera")
+
+
+def test_big_endian_and_strided_arrays_are_sent_correctly():
+    big = np.arange(24, dtype=">f4").reshape(2, 4, 3)
+    back = unpack_frame(pack(make_frame(big.astype(np.float32))))
+    np.testing.assert_array_equal(back.points, big)
+    strided = np.arange(48, dtype=np.float32).reshape(2, 8, 3)[:, ::2]
+    np.testing.assert_array_equal(unpack_frame(pack(make_frame(strided))).points, strided)
+
+
+def test_pose_and_observations_round_trip():
+    pose = Pose(3.0, 1.0, -2.0, 0.5, np.diag([0.1, 0.2, 0.3]))
+    assert unpack_pose(pack(pose)).to_map() == pose.to_map()
+    wall = WallObservation(
+        np.array([1.0, 2.0]), np.eye(2) * 1e-4, np.zeros(2), np.ones(2), 30, 0.01
+    )
+    obs = Observations("r", 1, 2.0, "base_link", [wall])
+    assert unpack_observations(pack(obs)).to_map() == obs.to_map()
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"\xc1garbage", "not a msgpack payload"),
+        (msgpack.packb([1, 2]), "not a map"),
+        (msgpack.packb({"stamp": 1.0}), "schema version None"),
+        (msgpack.packb({"v": 2, "stamp": 1.0}), "schema version 2"),
+        (codec.encode({"stamp": 1.0, "x": 0.0, "y": 0.0}), "missing field 'yaw'"),
+        (codec.encode({"stamp": 1.0, "x": math.nan, "y": 0.0, "yaw": 0.0}), "'x' is not finite"),
+        (codec.encode({"stamp": 1.0, "x": math.inf, "y": 0.0, "yaw": 0.0}), "'x' is not finite"),
+        (codec.encode({"stamp": "now", "x": 0.0, "y": 0.0, "yaw": 0.0}), "must be a number"),
+        (
+            codec.encode({"stamp": 1.0, "x": 0.0, "y": 0.0, "yaw": 0.0, "cov": [[1, 0], [0, 1]]}),
+            "shape",
+        ),
+        (
+            codec.encode(
+                {"stamp": 1.0, "x": 0.0, "y": 0.0, "yaw": 0.0, "cov": (-np.eye(3)).tolist()}
+            ),
+            "positive semi-definite",
+        ),
+    ],
+)
+def test_bad_poses_are_refused_with_their_reason(payload, reason):
+    with pytest.raises(MessageError, match=reason):
+        unpack_pose(payload)
+
+
+def test_bad_frames_are_refused_with_their_reason():
+    good = make_frame().to_map()
+    cases = {
+        "float32 array": {**good, "points": np.zeros((2, 2, 3), np.float64)},
+        "shape": {**good, "points": np.zeros((2, 2, 2), np.float32)},
+        "base_from_sensor": {**good, "base_from_sensor": np.eye(3)},
+        "'seq' must be an integer": {**good, "seq": 1.5},
+    }
+    for reason, m in cases.items():
+        with pytest.raises(MessageError, match=reason):
+            unpack_frame(codec.encode(m))
+    lying = codec.encode(good).replace(b"<f4", b"<f8")  # dtype that does not fit the bytes
+    with pytest.raises(MessageError, match="does not match"):
+        unpack_frame(lying)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=256))
+def test_random_bytes_never_crash_a_decoder(data):
+    for unpack in (unpack_pose, unpack_frame, unpack_observations):
+        try:
+            unpack(data)
+        except MessageError:
+            pass
+
+
+json_like = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.floats()
+    | st.text(max_size=5)
+    | st.binary(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=5)
+    ),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.dictionaries(
+        st.sampled_from(
+            ["stamp", "x", "y", "yaw", "cov", "points", "walls", "run", "seq", "__nd__"]
+        ),
+        json_like,
+    )
+)
+def test_wrong_types_never_crash_a_decoder(fields):
+    data = msgpack.packb({"v": 1, **fields}, use_bin_type=True)
+    for unpack in (unpack_pose, unpack_frame, unpack_observations):
+        try:
+            unpack(data)
+        except MessageError:
+            pass

@@ -1,0 +1,167 @@
+"""The wall map on observations simulated from known walls, the pose buffer and the state file."""
+
+import json
+
+import numpy as np
+import pytest
+
+from wallmap.common import wall_model
+from wallmap.common.messages import Observations, Pose, WallObservation
+from wallmap.services.mapper import state_file
+from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer
+from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+
+# A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
+WALLS = [
+    ((-4.0, -3.0), (5.0, -2.0)),
+    ((5.0, -2.0), (4.0, 4.0)),
+    ((4.0, 4.0), (0.6, 4.3)),
+    ((-0.6, 4.4), (-4.0, 4.7)),  # beyond a 1.2 m doorway
+    ((-4.0, 4.7), (-4.0, -3.0)),
+    ((-2.0, -2.0), (2.0, 2.0)),  # a free-standing wall on the line y = x, through the origin
+]
+
+
+def observe(pose, rng, noise=0.01, max_range=6.0):
+    """What the detector would report: visible walls as closest point, covariance, extent."""
+    x, y, yaw = pose
+    rot = wall_model.rotation(yaw)
+    out = []
+    for a, b in WALLS:
+        p0, p1 = np.array(a), np.array(b)
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        t = np.linspace(0, np.linalg.norm(p1 - p0), 40)
+        pts = p0 + t[:, None] * d
+        rel = (pts - [x, y]) @ rot  # robot frame
+        keep = (np.linalg.norm(rel, axis=1) < max_range) & (rel[:, 0] > 0.3)
+        if keep.sum() < 10:
+            continue
+        foot = p0 + ((np.array([x, y]) - p0) @ d) * d
+        z = rot.T @ (foot - [x, y])
+        if np.linalg.norm(z) < 0.3:
+            continue
+        cov = np.diag([noise**2, noise**2])
+        z = z + rng.normal(0, noise, 2)
+        seen = rel[keep]
+        out.append(WallObservation(z, cov, seen[0], seen[-1], int(keep.sum()), noise))
+    return out
+
+
+def drive(rng, n=300):
+    t = np.linspace(0, 2 * np.pi, n)
+    return np.column_stack(
+        [1.8 * np.cos(t) + 0.5, 1.5 * np.sin(t), t + np.pi / 2 + 0.6 * np.sin(5 * t)]
+    )
+
+
+def build_map(rng, config=None):
+    wall_map = WallMap(config)
+    for i, pose in enumerate(drive(rng)):
+        obs = Observations("run", i, 100.0 + i / 15, "base_link", observe(pose, rng))
+        wall_map.integrate(obs, Pose(100.0 + i / 15, *pose))
+    return wall_map
+
+
+def line_error(wall_reply, p0, p1):
+    p0, p1 = np.array(p0), np.array(p1)
+    d = (p1 - p0) / np.linalg.norm(p1 - p0)
+    n = np.array([-d[1], d[0]])
+    q0, q1 = np.array(wall_reply["p0"]), np.array(wall_reply["p1"])
+    return max(abs((q0 - p0) @ n), abs((q1 - p0) @ n))
+
+
+def test_every_wall_is_mapped_once_and_accurately():
+    rng = np.random.default_rng(5)
+    wall_map = build_map(rng)
+    walls = wall_map.reply(min_obs=3)["walls"]
+    assert len(walls) == len(WALLS), [w["n_obs"] for w in walls]
+    for p0, p1 in WALLS:
+        errors = [line_error(w, p0, p1) for w in walls]
+        assert min(errors) < 0.01
+    assert wall_map.frames == 300
+
+
+def test_reported_closest_point_and_covariance_are_in_the_map_frame():
+    rng = np.random.default_rng(6)
+    wall_map = build_map(rng)
+    for w in wall_map.reply(min_obs=3)["walls"]:
+        p0, p1 = np.array(w["p0"]), np.array(w["p1"])
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        foot = p0 - (p0 @ d) * d  # the line's closest point to the origin
+        np.testing.assert_allclose([w["u"], w["v"]], foot, atol=1e-6)
+        assert np.all(np.linalg.eigvalsh(np.array(w["cov"])) >= 0)
+
+
+def test_observations_with_the_paper_point_model_would_fragment_walls():
+    # The same observations, but states moved as points (the paper's eqs 1-3): count new walls.
+    rng = np.random.default_rng(5)
+    walls_point_model = []
+    for pose in drive(rng):
+        rot = wall_model.rotation(pose[2])
+        for obs in observe(pose, rng):
+            uv = pose[:2] + rot @ obs.closest  # the paper: a point moved into the map
+            if not any(np.linalg.norm(uv - w) < 0.1 for w in walls_point_model):
+                walls_point_model.append(uv)
+    assert len(walls_point_model) > 5 * len(WALLS)
+
+
+def test_collinear_walls_far_apart_stay_separate():
+    config = MapperConfig(max_extent_gap=1.0)
+    wall_map = WallMap(config)
+    cov = np.eye(2) * 1e-4
+    left = WallObservation(
+        np.array([0.0, 2.0]), cov, np.array([-6.0, 2.0]), np.array([-3.0, 2.0]), 40, 0.01
+    )
+    right = WallObservation(
+        np.array([0.0, 2.0]), cov, np.array([3.0, 2.0]), np.array([6.0, 2.0]), 40, 0.01
+    )
+    wall_map.integrate(Observations("r", 0, 1.0, "base_link", [left, right]), Pose(1.0, 0, 0, 0))
+    assert len(wall_map.walls) == 2
+    near = WallObservation(
+        np.array([0.0, 2.0]), cov, np.array([-2.5, 2.0]), np.array([0.0, 2.0]), 40, 0.01
+    )
+    ids = wall_map.integrate(Observations("r", 1, 2.0, "base_link", [near]), Pose(2.0, 0, 0, 0))
+    assert ids == [0]
+    wall = wall_map.reply()["walls"][0]
+    assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 0.0])
+
+
+def test_state_round_trip_keeps_ids_and_numbers(tmp_path):
+    rng = np.random.default_rng(7)
+    wall_map = build_map(rng)
+    path = tmp_path / "map.json"
+    state_file.write(path, state_file.to_json(wall_map))
+    again = state_file.load(path, MapperConfig())
+    assert again.reply(trajectory=True) == wall_map.reply(trajectory=True)
+    assert again.next_id == wall_map.next_id
+    assert len(again.trajectory) > 20
+
+
+def test_unusable_state_file_is_refused_with_a_reason(tmp_path):
+    path = tmp_path / "map.json"
+    path.write_text("{not json")
+    with pytest.raises(state_file.StateError, match="unusable"):
+        state_file.load(path, MapperConfig())
+    path.write_text(json.dumps({"v": 99}))
+    with pytest.raises(state_file.StateError, match="version"):
+        state_file.load(path, MapperConfig())
+    assert state_file.load(tmp_path / "absent.json", MapperConfig()).walls == {}
+
+
+def test_pose_buffer_interpolates_waits_and_refuses():
+    buf = PoseBuffer()
+    assert buf.lookup(1.0) is Lookup.WAIT
+    buf.add(Pose(1.0, 0.0, 0.0, np.pi - 0.1))
+    buf.add(Pose(1.2, 2.0, 0.0, -np.pi + 0.1))
+    mid = buf.lookup(1.1)
+    assert mid.x == pytest.approx(1.0)
+    assert abs(abs(mid.yaw) - np.pi) < 1e-9  # through +-pi, not through 0
+    assert buf.lookup(1.2).x == 2.0
+    assert buf.lookup(1.3) is Lookup.WAIT
+    assert buf.lookup(0.5) is Lookup.MISSING
+    buf.add(Pose(3.0, 9.0, 0.0, 0.0))  # a gap of 1.8 s: not interpolated across
+    assert buf.lookup(2.0) is Lookup.MISSING
+    buf.add(Pose(1.1, 5.0, 0.0, 0.0))  # out of order: inserted in place
+    assert buf.lookup(1.1).x == 5.0
+    buf.add(Pose(-500.0, 0.0, 0.0, 0.0))  # time jumped back: a new run
+    assert len(buf) == 1

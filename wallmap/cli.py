@@ -1,0 +1,255 @@
+"""The ``wallmap`` command: one console script, one subcommand per service or tool.
+
+Every failure a person can cause (a missing bag, a bad flag, no router) ends with one line
+``wallmap <command>: error: <why>`` and exit status 1; usage errors exit 2, as argparse does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from wallmap import __version__
+from wallmap.common.ransac import RansacParams
+from wallmap.common.runtime import setup_logging, stop_on_signals
+from wallmap.common.transport import (
+    DEFAULT_CONNECT,
+    Keys,
+    TransportError,
+    add_zenoh_arguments,
+    open_session,
+    settings_from_args,
+)
+from wallmap.launcher import UpOptions, demo, up
+from wallmap.map_client import QueryError, fetch_map, format_table, to_json
+from wallmap.services.detector import service as detector_service
+from wallmap.services.detector.detector import DetectorConfig
+from wallmap.services.detector.scan_row import RowSelection
+from wallmap.services.mapper import service as mapper_service
+from wallmap.services.mapper.state_file import StateError
+from wallmap.services.player import service as player_service
+from wallmap.services.player.errors import PlayerError
+
+FAILURES = (TransportError, PlayerError, StateError, QueryError, OSError)
+
+
+def _positive(value: str) -> float:
+    x = float(value)
+    if not math.isfinite(x) or x <= 0:
+        msg = f"must be a positive number, got {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return x
+
+
+def _band(value: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in value.split(","))
+    except ValueError as err:
+        msg = f"expected LOW,HIGH in metres, got {value!r}"
+        raise argparse.ArgumentTypeError(msg) from err
+    if not low < high:
+        msg = f"LOW must be below HIGH, got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return low, high
+
+
+def _cmd_router(args: argparse.Namespace) -> int:
+    log = setup_logging("router")
+    stop = stop_on_signals()
+    listen = tuple(args.listen or [DEFAULT_CONNECT])
+    settings = settings_from_args(args, wait_for_router=0.0)
+    with open_session(settings, mode="router", listen=listen):
+        log.info("listening on %s", ", ".join(listen))
+        stop.wait()
+    return 0
+
+
+def _cmd_detector(args: argparse.Namespace) -> int:
+    config = DetectorConfig(
+        rows=RowSelection(mode=args.rows, band=args.band, row_fraction=args.row_fraction),
+        ransac=RansacParams(noise_k=args.noise_k),
+        seed=args.seed,
+    )
+    detector_service.run(
+        settings_from_args(args, wait_for_router=math.inf), config, stop_on_signals()
+    )
+    return 0
+
+
+def _cmd_mapper(args: argparse.Namespace) -> int:
+    mapper = mapper_service.MapperSettings(
+        state=args.state, pose_key=args.pose_key, pose_wait=args.pose_wait
+    )
+    mapper_service.run(
+        settings_from_args(args, wait_for_router=math.inf), mapper, stop_on_signals()
+    )
+    return 0
+
+
+def _cmd_player(args: argparse.Namespace) -> int:
+    player = player_service.PlayerSettings(
+        bag=args.bag,
+        rate=args.rate,
+        fast=args.fast,
+        pose_source=args.pose_source,
+        sensor_topic=args.sensor_topic,
+        wait_for=tuple(filter(None, args.wait_for.split(",")))
+        if args.wait_for is not None
+        else ("detector", "mapper")
+        if args.fast
+        else (),
+        wait_timeout=args.wait_timeout,
+    )
+    settings = settings_from_args(args, wait_for_router=args.wait_timeout)
+    result = player_service.run(settings, player, stop_on_signals())
+    print(result.summary())
+    return 0
+
+
+def _cmd_query(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args, wait_for_router=0.0)
+    with open_session(settings) as session:
+        reply = fetch_map(
+            session, Keys(settings.prefix), min_obs=args.min_obs, timeout=args.timeout
+        )
+    print(to_json(reply) if args.json else format_table(reply))
+    return 0
+
+
+def _cmd_up(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args, wait_for_router=0.0)
+    options = UpOptions(
+        bag=args.bag,
+        fast=args.fast,
+        rate=args.rate,
+        pose_source=args.pose_source,
+        sensor_topic=args.sensor_topic,
+        state=args.state,
+        exit_when_done=args.exit_when_done,
+        json_out=args.json_out,
+        svg_out=args.svg_out,
+        min_obs=args.min_obs,
+    )
+    return up(settings, options)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    return demo(args.out)
+
+
+def _add_bag_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("bag", type=Path, metavar="BAG", help="ROS 1 .bag file or ROS 2 bag folder")
+    speed = p.add_mutually_exclusive_group()
+    speed.add_argument("--rate", type=_positive, default=1.0, help="speed factor (default 1)")
+    speed.add_argument("--fast", action="store_true", help="as fast as the pipeline takes it")
+    p.add_argument(
+        "--pose-source",
+        default="tf",
+        metavar="SPEC",
+        help="tf | tf:PARENT>CHILD | odom[:TOPIC] | pose[:TOPIC] | tum:FILE | none (default tf)",
+    )
+    p.add_argument("--sensor-topic", metavar="TOPIC", help="sensor topic, if the bag has several")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole command line."""
+    parser = argparse.ArgumentParser(
+        prog="wallmap", description="Map the walls of a building from a moving RGB-D sensor."
+    )
+    parser.add_argument("--version", action="version", version=f"wallmap {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("router", help="a Zenoh router")
+    p.add_argument(
+        "--listen", action="append", metavar="ENDPOINT", help=f"default {DEFAULT_CONNECT}"
+    )
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_router)
+
+    p = sub.add_parser("player", help="play a bag: sensor frames and poses")
+    _add_bag_arguments(p)
+    p.add_argument(
+        "--wait-timeout", type=_positive, default=30.0, help="wait for router and services (s)"
+    )
+    p.add_argument(
+        "--wait-for",
+        metavar="SERVICES",
+        help="services to wait for before playing, comma-separated (default with --fast: "
+        "detector,mapper; else none); waiting for the mapper also waits for it to finish",
+    )
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_player)
+
+    p = sub.add_parser("detector", help="sensor frames -> wall observations")
+    p.add_argument(
+        "--rows", choices=("band", "row"), default="band", help="row choice (default band)"
+    )
+    p.add_argument(
+        "--band", type=_band, default=(1.3, 2.1), metavar="LOW,HIGH", help="height band (m)"
+    )
+    p.add_argument(
+        "--row-fraction", type=float, default=0.25, help="row from the top, for --rows row"
+    )
+    p.add_argument(
+        "--noise-k", type=float, default=1.425e-3, help="depth noise: sigma = k * range^2"
+    )
+    p.add_argument("--seed", type=int, default=0, help="RANSAC seed")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_detector)
+
+    p = sub.add_parser("mapper", help="the EKF wall map, served as a queryable")
+    p.add_argument(
+        "--state", type=Path, metavar="FILE", help="keep the map in FILE across restarts"
+    )
+    p.add_argument(
+        "--pose-key", metavar="KEYEXPR", help="where poses come from (default PREFIX/pose)"
+    )
+    p.add_argument("--pose-wait", type=_positive, default=5.0, help="max wait for a pose (s)")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_mapper)
+
+    p = sub.add_parser("query", help="print the current wall map")
+    p.add_argument("--json", action="store_true", help="the contract's JSON instead of a table")
+    p.add_argument(
+        "--min-obs", type=int, default=1, metavar="N", help="walls seen at least N times"
+    )
+    p.add_argument("--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_query)
+
+    p = sub.add_parser("up", help="router + detector + mapper + player on one machine")
+    _add_bag_arguments(p)
+    p.add_argument("--state", type=Path, metavar="FILE", help="the mapper's state file")
+    p.add_argument("--exit-when-done", action="store_true", help="stop everything after the bag")
+    p.add_argument("--json-out", type=Path, metavar="FILE", help="write the final map as JSON")
+    p.add_argument("--svg-out", type=Path, metavar="FILE", help="draw the final map as SVG")
+    p.add_argument(
+        "--min-obs", type=int, default=3, metavar="N", help="walls printed: seen N times"
+    )
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_up)
+
+    p = sub.add_parser("demo", help="run the pipeline on the sample bag shipped with wallmap")
+    p.add_argument("--out", type=Path, default=Path("wallmap-demo.svg"), help="picture file")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script."""
+    args = build_parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except FAILURES as err:
+        print(f"wallmap {args.command}: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

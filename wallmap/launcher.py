@@ -1,0 +1,128 @@
+"""``wallmap up`` and ``wallmap demo``: a router and the three services as processes, one command.
+
+Each service runs as its own process, exactly as in ``docker-compose.yml``, so what works here
+works there. The player waits for the detector and mapper to be live before its first frame and,
+at the end of the bag, for the mapper to acknowledge every frame; so when it exits, the map is
+complete and can be fetched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from wallmap.common.runtime import stop_on_signals
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.map_client import fetch_map, format_table, to_json
+from wallmap.picture import write_svg
+
+STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
+
+
+@dataclass(frozen=True)
+class UpOptions:
+    """What ``wallmap up`` runs and what it writes."""
+
+    bag: Path
+    fast: bool = False
+    rate: float = 1.0
+    pose_source: str = "tf"
+    sensor_topic: str | None = None
+    state: Path | None = None
+    exit_when_done: bool = False
+    json_out: Path | None = None
+    svg_out: Path | None = None
+    min_obs: int = 3
+
+
+def free_loopback_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wallmap(*args: str) -> list[str]:
+    return [sys.executable, "-m", "wallmap", *args]
+
+
+@contextlib.contextmanager
+def _processes() -> Iterator[list[subprocess.Popen[bytes]]]:
+    """Started processes, stopped in reverse order (SIGTERM, then SIGKILL) on the way out."""
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        yield procs
+    finally:
+        for proc in reversed(procs):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    proc.wait(timeout=STOP_TIMEOUT)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+
+
+def up(settings: ZenohSettings, options: UpOptions) -> int:
+    """Run router, mapper, detector and player; print the map when the bag is done."""
+    endpoint = settings.connect[0]
+    common = ["--connect", endpoint, "--prefix", settings.prefix]
+    if settings.config_file:
+        common += ["--zenoh-config", str(settings.config_file)]
+    env = {**os.environ, "WALLMAP_LOG": os.environ.get("WALLMAP_LOG", "WARNING")}
+    mapper_args = ["mapper", *common] + (["--state", str(options.state)] if options.state else [])
+    speed = ["--fast"] if options.fast else ["--rate", str(options.rate)]
+    player_args = ["player", str(options.bag), *speed, "--pose-source", options.pose_source]
+    player_args += ["--wait-for", "detector,mapper", *common]
+    if options.sensor_topic:
+        player_args += ["--sensor-topic", options.sensor_topic]
+    stop = stop_on_signals()
+    with _processes() as procs:
+        router_args = ["router", "--listen", endpoint, "--prefix", settings.prefix]
+        procs.append(subprocess.Popen(_wallmap(*router_args), env=env))
+        procs.append(subprocess.Popen(_wallmap(*mapper_args), env=env))
+        procs.append(subprocess.Popen(_wallmap("detector", *common), env=env))
+        player = subprocess.Popen(_wallmap(*player_args), env=env)
+        procs.append(player)
+        while player.poll() is None and not stop.is_set():
+            stop.wait(0.1)
+        if stop.is_set():
+            return 130
+        if player.returncode != 0:
+            return player.returncode
+        with open_session(settings) as session:
+            reply = fetch_map(session, Keys(settings.prefix), min_obs=options.min_obs)
+            trajectory = fetch_map(session, Keys(settings.prefix), trajectory=True)["trajectory"]
+        print(format_table(reply))
+        if options.json_out:
+            options.json_out.write_text(to_json(reply), encoding="utf-8")
+        if options.svg_out:
+            path = np.array([p[1:3] for p in trajectory]).reshape(-1, 2)
+            write_svg(options.svg_out, reply["walls"], path)
+            print(f"picture: {options.svg_out}")
+        if not options.exit_when_done:
+            print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
+            stop.wait()
+    return 0
+
+
+def sample_bag() -> Path:
+    """The sample bag shipped inside the package."""
+    return Path(str(resources.files("wallmap") / "data" / "sample.bag"))
+
+
+def demo(out: Path) -> int:
+    """``wallmap up`` on the sample bag, on a private loopback port, with a picture."""
+    settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",))
+    options = UpOptions(bag=sample_bag(), fast=True, exit_when_done=True, svg_out=out)
+    return up(settings, options)
