@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common.line_fit import LineFit, fit_line
+from wallmap.common.line_fit import LineFit, bend_split, fit_line
 
 Array = NDArray[np.float64]
 
@@ -33,8 +33,12 @@ class RansacParams:
         min_length: shortest segment reported (m).
         max_gap: largest gap between neighbouring inliers along one line (m).
         max_lines: most lines taken from one cluster.
-        sigma_floor: lower bound on the per-point noise used for the covariance (m).
+        sigma_floor: lower bound on the per-point noise (m).
         cov_scale: factor on the fitted covariance (correlated noise along a scan).
+        split_f: F statistic above which a line is cut in two at a kink.
+        max_angle_sd: lines less sure of their direction than this are dropped (rad): a short,
+            far, noisy segment cannot tell two walls meeting at a shallow angle apart, and fed
+            to the map it blends them into a wall that is neither.
     """
 
     iterations: int = 96
@@ -47,6 +51,8 @@ class RansacParams:
     max_lines: int = 8
     sigma_floor: float = 0.005
     cov_scale: float = 4.0
+    split_f: float = 12.0
+    max_angle_sd: float = 0.04
 
 
 def split_at_nans(points: Array) -> list[NDArray[np.intp]]:
@@ -56,10 +62,10 @@ def split_at_nans(points: Array) -> list[NDArray[np.intp]]:
     return [np.arange(start, stop) for start, stop in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def inlier_band(points: Array, params: RansacParams) -> Array:
-    """Per-point inlier distance: wider for far points, whose depth is noisier."""
+def point_sigmas(points: Array, params: RansacParams) -> Array:
+    """Per-point noise: a depth camera's grows with the square of the range."""
     range2 = np.einsum("ij,ij->i", points, points)
-    return np.maximum(params.inlier_min, params.inlier_sigmas * params.noise_k * range2)
+    return np.maximum(params.sigma_floor, params.noise_k * range2)
 
 
 def _best_hypothesis(
@@ -77,40 +83,50 @@ def _best_hypothesis(
     return inliers[np.argmax(inliers.sum(axis=1))]
 
 
-def _segments(fit: LineFit, points: Array, max_gap: float) -> list[NDArray[np.intp]]:
-    """Split the points of one line where consecutive points along it are too far apart."""
+def _segments(
+    fit: LineFit, points: Array, sigmas: Array, params: RansacParams
+) -> list[NDArray[np.intp]]:
+    """Cut the points of one line at gaps along it and at kinks; each piece ordered along it."""
     along = np.array([-fit.normal[1], fit.normal[0]])
     order = np.argsort(points @ along)
     gaps = np.diff(points[order] @ along)
-    cuts = np.flatnonzero(gaps > max_gap) + 1
-    return np.split(order, cuts)
+    pieces = np.split(order, np.flatnonzero(gaps > params.max_gap) + 1)
+    done = []
+    while pieces:
+        piece = pieces.pop()
+        cut = bend_split(points[piece], sigmas[piece], params.min_points, params.split_f)
+        if cut is None:
+            done.append(piece)
+        else:
+            pieces += [piece[:cut], piece[cut:]]
+    return done
 
 
 def find_lines(points: Array, params: RansacParams, rng: np.random.Generator) -> list[LineFit]:
     """Sequential RANSAC over one cluster of finite points (N x 2)."""
     lines: list[LineFit] = []
     remaining = np.arange(len(points))
-    band_all = inlier_band(points, params)
+    sigmas_all = point_sigmas(points, params)
+    band_all = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas_all)
     while len(remaining) >= params.min_points and len(lines) < params.max_lines:
-        pts, band = points[remaining], band_all[remaining]
+        pts, sigmas, band = points[remaining], sigmas_all[remaining], band_all[remaining]
         mask = _best_hypothesis(pts, band, rng, params.iterations)
         if mask.sum() < params.min_points:
             break
-        fit = fit_line(pts[mask])
+        fit = fit_line(pts[mask], sigmas[mask])
         # One refinement: the least-squares line picks up inliers the point pair missed.
         mask = np.abs(pts @ fit.normal - fit.offset) <= band
         if mask.sum() < params.min_points:
             break
         taken = np.flatnonzero(mask)
-        fit = fit_line(pts[taken])
+        fit = fit_line(pts[taken], sigmas[taken])
         accepted = []
-        for seg in _segments(fit, pts[taken], params.max_gap):
+        for seg in _segments(fit, pts[taken], sigmas[taken], params):
             if len(seg) < params.min_points:
                 continue
-            seg_fit = fit_line(
-                pts[taken[seg]], sigma_floor=params.sigma_floor, cov_scale=params.cov_scale
-            )
-            if seg_fit.length >= params.min_length:
+            idx = taken[seg]
+            seg_fit = fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
+            if seg_fit.length >= params.min_length and seg_fit.angle_sd <= params.max_angle_sd:
                 lines.append(seg_fit)
             accepted.append(taken[seg])
         if not accepted:

@@ -11,6 +11,7 @@ import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 from wallmap import __version__
 from wallmap.common.ransac import RansacParams
@@ -34,6 +35,13 @@ from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
 
 FAILURES = (TransportError, PlayerError, StateError, QueryError, OSError)
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, without the usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _positive(value: str) -> float:
@@ -156,7 +164,7 @@ def _add_bag_arguments(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole command line."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="wallmap", description="Map the walls of a building from a moving RGB-D sensor."
     )
     parser.add_argument("--version", action="version", version=f"wallmap {__version__}")

@@ -1,0 +1,177 @@
+"""Scoring a wall map against the ground-truth floor plan: the project's acceptance metric.
+
+A mapped wall is a dict with at least ``u, v`` (the point of its infinite line closest to
+the map origin) and ``p0, p1`` (the ends of its observed extent), all in the map frame;
+an ``id`` key, if present, names it in the report. The rules:
+
+* A mapped wall matches a true, non-glass wall when the angle between their lines is
+  at most ``max_angle_deg``, their extents overlap (the projections of p0, p1 onto the
+  true wall's line overlap the true segment by more than 0) and the mapped line passes
+  within ``max_offset`` of the midpoint of that overlap.
+* precision = mapped walls matching at least one true wall / mapped walls (1 if none).
+* recall = true non-glass walls seen in at least ``min_frames`` frames and matched /
+  such walls (1 if none).
+* duplicates = true walls matched by two or more mapped walls.
+* For each matched true wall its best match (smallest offset) gives an angle and an
+  offset error; their medians are reported (NaN if nothing matched).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .scene.floorplan import FloorPlan, Wall
+
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class MapScore:
+    """How well a wall map matches the truth. See the module docstring for the rules.
+
+    Attributes:
+        precision: Share of mapped walls that match a true wall.
+        recall: Share of sufficiently seen true walls that are matched.
+        duplicates: True walls matched by two or more mapped walls.
+        median_angle_deg: Median angle error of the best matches.
+        median_offset_m: Median offset error of the best matches.
+        n_mapped: Mapped walls.
+        n_mapped_matched: Mapped walls that match a true wall.
+        n_true: True non-glass walls seen in at least ``min_frames`` frames.
+        n_true_matched: Of those, the matched ones.
+        unmatched_mapped: Ids (or list indices) of mapped walls matching nothing.
+        unmatched_true: Ids of sufficiently seen true walls that no mapped wall matches.
+    """
+
+    precision: float
+    recall: float
+    duplicates: int
+    median_angle_deg: float
+    median_offset_m: float
+    n_mapped: int
+    n_mapped_matched: int
+    n_true: int
+    n_true_matched: int
+    unmatched_mapped: list[Any]
+    unmatched_true: list[int]
+
+    def summary(self) -> str:
+        """One readable line."""
+        return (
+            f"precision {self.precision:.3f} ({self.n_mapped_matched}/{self.n_mapped}), "
+            f"recall {self.recall:.3f} ({self.n_true_matched}/{self.n_true}), "
+            f"duplicates {self.duplicates}, "
+            f"median angle error {self.median_angle_deg:.2f} deg, "
+            f"median offset error {self.median_offset_m:.3f} m"
+        )
+
+
+def mapped_line(wall: Mapping[str, Any]) -> tuple[np.ndarray, float] | None:
+    """Unit direction and signed offset of a mapped wall's line {q : n·q = offset}.
+
+    The direction comes from p1 - p0, because (u, v) says nothing about it when the line
+    passes through the origin; the offset comes from (u, v), which lies on the line. The
+    normal n is the direction turned left. If p0 = p1 the direction falls back to the one
+    perpendicular to (u, v); None if both are degenerate.
+    """
+    uv = np.array([wall["u"], wall["v"]], dtype=float)
+    extent = np.asarray(wall["p1"], dtype=float) - np.asarray(wall["p0"], dtype=float)
+    if np.linalg.norm(extent) > _EPS:
+        direction = extent / np.linalg.norm(extent)
+    elif np.linalg.norm(uv) > _EPS:
+        direction = np.array([-uv[1], uv[0]]) / np.linalg.norm(uv)
+    else:
+        return None
+    normal = np.array([-direction[1], direction[0]])
+    return direction, float(normal @ uv)
+
+
+def match_errors(wall: Mapping[str, Any], truth: Wall) -> tuple[float, float] | None:
+    """Angle (deg) and offset (m) of a mapped wall against a true wall; None if disjoint.
+
+    The offset is the distance from the mapped line to the midpoint of the overlap of the
+    two extents along the true wall; without overlap there is nothing to compare.
+    """
+    line = mapped_line(wall)
+    if line is None:
+        return None
+    direction, offset = line
+    a, b = np.asarray(truth.p0, dtype=float), np.asarray(truth.p1, dtype=float)
+    length = float(np.linalg.norm(b - a))
+    along = (b - a) / length
+    s0 = float((np.asarray(wall["p0"], dtype=float) - a) @ along)
+    s1 = float((np.asarray(wall["p1"], dtype=float) - a) @ along)
+    lo, hi = max(min(s0, s1), 0.0), min(max(s0, s1), length)
+    if hi - lo <= 0.0:
+        return None
+    cross = float(direction[0] * along[1] - direction[1] * along[0])
+    angle = math.degrees(math.atan2(abs(cross), abs(float(direction @ along))))
+    middle = a + along * (lo + hi) / 2
+    normal = np.array([-direction[1], direction[0]])
+    return angle, abs(float(normal @ middle) - offset)
+
+
+def evaluate_map(
+    mapped: Sequence[Mapping[str, Any]],
+    plan: FloorPlan,
+    seen_counts: Mapping[int, int],
+    *,
+    min_frames: int = 3,
+    max_angle_deg: float = 5.0,
+    max_offset: float = 0.15,
+) -> MapScore:
+    """Score a wall map against the plan it was built from (rules in the module docstring).
+
+    Args:
+        mapped: Mapped walls, dicts with ``u, v, p0, p1`` (and optionally ``id``).
+        plan: Ground truth.
+        seen_counts: Per true wall id, the frames in which the detector could see it.
+        min_frames: True walls seen in fewer frames are not required for recall.
+        max_angle_deg: Largest angle between matching lines.
+        max_offset: Largest distance from the mapped line to the overlap's midpoint.
+
+    Returns:
+        The score.
+    """
+    solid = [w for w in plan.walls if not w.glass]
+    # Best (smallest offset) match per true wall, and how many mapped walls match it.
+    best: dict[int, tuple[float, float]] = {}
+    match_count = dict.fromkeys((w.id for w in solid), 0)
+    unmatched_mapped: list[Any] = []
+    for index, wall in enumerate(mapped):
+        matched = False
+        for truth in solid:
+            errors = match_errors(wall, truth)
+            if errors is None or errors[0] > max_angle_deg or errors[1] > max_offset:
+                continue
+            matched = True
+            match_count[truth.id] += 1
+            if truth.id not in best or errors[1] < best[truth.id][1]:
+                best[truth.id] = errors
+        if not matched:
+            unmatched_mapped.append(wall.get("id", index))
+
+    required = [w.id for w in solid if seen_counts.get(w.id, 0) >= min_frames]
+    unmatched_true = [i for i in required if i not in best]
+    n_mapped_matched = len(mapped) - len(unmatched_mapped)
+    n_true_matched = len(required) - len(unmatched_true)
+    angles = [e[0] for e in best.values()]
+    offsets = [e[1] for e in best.values()]
+    return MapScore(
+        precision=n_mapped_matched / len(mapped) if mapped else 1.0,
+        recall=n_true_matched / len(required) if required else 1.0,
+        duplicates=sum(1 for k in match_count.values() if k >= 2),
+        median_angle_deg=float(np.median(angles)) if angles else math.nan,
+        median_offset_m=float(np.median(offsets)) if offsets else math.nan,
+        n_mapped=len(mapped),
+        n_mapped_matched=n_mapped_matched,
+        n_true=len(required),
+        n_true_matched=n_true_matched,
+        unmatched_mapped=unmatched_mapped,
+        unmatched_true=unmatched_true,
+    )

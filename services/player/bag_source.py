@@ -1,0 +1,498 @@
+"""Read a ROS 1 or ROS 2 bag into sensor frames and robot poses for the player to publish.
+
+Opening a bag does everything that can fail up front (format, sensor topic choice, pose source,
+tf mounting), so a user sees one clear error before any frame is published. ``frames()`` then
+streams the sensor topic in bag order, decoding each message into an organized xyz grid with its
+mounting transform and the robot pose interpolated at the message's stamp.
+"""
+
+import dataclasses
+import math
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
+from rosbags.typesys import Stores, get_typestore
+
+from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xyz
+from wallmap.services.player.errors import PlayerError, TfError
+from wallmap.services.player.frames import Pose2D, SensorFrame, header_stamp
+from wallmap.services.player.laserscan import laserscan_to_xyz
+from wallmap.services.player.pointcloud import pointcloud2_to_xyz
+from wallmap.services.player.pose_sources import (
+    DEFAULT_CHILD,
+    PoseSourceSpec,
+    PoseTrack,
+    load_tum,
+    parse_pose_source,
+    pose_from_matrix,
+    pose_from_message,
+    resolve_pose_topic,
+)
+from wallmap.services.player.tf_buffer import TfBuffer, normalize_frame
+
+__all__ = ["BagSource", "Pose2D", "SensorFrame"]
+
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+IMAGE = "sensor_msgs/msg/Image"
+LASERSCAN = "sensor_msgs/msg/LaserScan"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+# tf2's message, and tf1's older one with the same layout (both renamed to ROS 2 style).
+TF_TYPES = frozenset({"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"})
+TF_TOPICS = {"tf": False, "tf_static": True}  # normalised topic name -> static
+# How far (s) a sensor stamp may lie outside the pose data and still get the end pose.
+POSE_TOLERANCE = 0.05
+SUPPORTED_SENSORS = (
+    f"organized {POINTCLOUD2}, {IMAGE} depth ({'/'.join(SUPPORTED_ENCODINGS)}) with a "
+    f"{CAMERA_INFO} topic in the same namespace, {LASERSCAN}"
+)
+BAG_FORMS = "a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml, or a ROS 2 .mcap file"
+
+Decoder = Callable[[Any], np.ndarray]
+
+
+def _one_line(err: BaseException) -> str:
+    """A library error as one readable line (some rosbags errors have no text)."""
+    text = " ".join(str(err).split())
+    return text or type(err).__name__
+
+
+def _unreadable(path: Path, err: BaseException) -> PlayerError:
+    """The error for a bag rosbags fails on, with its reason kept as one line."""
+    return PlayerError(
+        f"cannot read bag {path}; it looks damaged or was written by an unsupported recorder "
+        f"({_one_line(err)})"
+    )
+
+
+def _check_path(path: Path) -> None:
+    """Reject paths rosbags cannot read with a message saying why, before rosbags sees them."""
+    if not path.exists():
+        raise PlayerError(f"bag not found: {path}")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise PlayerError(f"{path} is a folder without metadata.yaml; expected {BAG_FORMS}")
+        return
+    try:
+        with path.open("rb") as file:
+            magic = file.read(16)
+    except OSError as err:
+        raise PlayerError(f"cannot read bag {path}: {_one_line(err)}") from err
+    if magic.startswith(b"#ROSRECORD"):
+        raise PlayerError(
+            f"{path} is an old '#ROSRECORD V1.x' bag, which cannot be read; convert it to "
+            f"format 2.0 with ROS 1's `rosbag fix` first"
+        )
+    # rosbags picks the format from the file name, so the suffix has to match the contents.
+    formats = {b"#ROSBAG V2.0": ".bag", b"\x89MCAP": ".mcap", b"SQLite format 3\x00": ".db3"}
+    for prefix, suffix in formats.items():
+        if magic.startswith(prefix):
+            if path.suffix != suffix:
+                raise PlayerError(f"{path} holds a {suffix} bag; rename it to end in {suffix}")
+            return
+    if magic.startswith(b"#ROSBAG"):
+        version = magic.split(b"\n", 1)[0].decode("ascii", "replace")
+        raise PlayerError(f"{path} is a {version!r} bag; only ROS 1 bag format 2.0 is supported")
+    raise PlayerError(f"{path} is not a ROS bag; expected {BAG_FORMS}")
+
+
+def _open_reader(path: Path) -> AnyReader:
+    """Open a bag with rosbags, turning every failure into a one-line PlayerError."""
+    _check_path(path)
+    # The default typestore only serves ROS 2 bags recorded without type definitions.
+    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    try:
+        reader.open()
+    except Exception as err:  # a damaged bag fails in many ways (even AssertionError)
+        raise _unreadable(path, err) from err
+    return reader
+
+
+def _namespace(topic: str) -> str:
+    """Topic namespace without leading '/': '/camera/depth/image_raw' -> 'camera/depth'."""
+    return topic.lstrip("/").rpartition("/")[0]
+
+
+def _planar_matrix(pose: Pose2D) -> np.ndarray:
+    """The 4x4 transform of a planar pose (frame <- child)."""
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    return np.array(
+        [[c, -s, 0.0, pose.x], [s, c, 0.0, pose.y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    )
+
+
+class BagSource:
+    """Sensor frames and robot poses from one bag, checked and ready when constructed.
+
+    Attributes:
+        path: The bag.
+        sensor_topic: Sensor topic as spelled in the bag.
+        sensor_type: Its message type, e.g. ``sensor_msgs/msg/PointCloud2``.
+        pose_spec: The parsed pose source.
+        base_frame: Robot frame that poses describe and ``T_base_sensor`` maps into.
+        warnings: Assumptions made while opening (e.g. an identity sensor mounting) for the CLI
+            to log.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        sensor_topic: str | None = None,
+        pose_source: str = "tf",
+        base_frame: str | None = None,
+    ) -> None:
+        """Open the bag and resolve the sensor topic, pose source and sensor mounting.
+
+        Args:
+            path: ROS 1 .bag file, ROS 2 bag folder, or ROS 2 .mcap file.
+            sensor_topic: Sensor topic (leading '/' optional); None detects the only candidate.
+            pose_source: A ``--pose-source`` spec (see ``parse_pose_source``).
+            base_frame: Robot frame; defaults to the pose source's child frame (``base_link``
+                for tf, pose, tum and none; the odometry's child frame for odom).
+
+        Raises:
+            PlayerError: Unreadable bag, no usable (or an ambiguous) sensor topic, a bad pose
+                source, or no tf chain from the sensor to the base frame when one is required.
+        """
+        self.path = Path(path)
+        self.pose_spec: PoseSourceSpec = parse_pose_source(pose_source)
+        self.warnings: list[str] = []
+        self._reader = _open_reader(self.path)
+        try:
+            self._setup(sensor_topic, base_frame)
+        except BaseException:
+            self._reader.close()
+            raise
+
+    def _setup(self, sensor_topic: str | None, base_frame: str | None) -> None:
+        """Resolve everything ``frames()`` needs; split from __init__ so failures close the bag."""
+        self._topics = {
+            name: info for name, info in self._reader.topics.items() if info.msgtype is not None
+        }
+        self._first: dict[str, Any] = {}
+        self.sensor_topic = self._resolve_sensor(sensor_topic)
+        self.sensor_type: str = self._topics[self.sensor_topic].msgtype or ""
+        self._tf = TfBuffer()
+        self._track: PoseTrack | None = None
+        # Poses from pose/tum sources (and odometry without a child frame) describe the base.
+        camera_info = self._load_first_pass(
+            normalize_frame(base_frame) if base_frame else DEFAULT_CHILD
+        )
+        self._decode = self._decoder(camera_info)
+
+        track = self._track
+        self._compose_track = False
+        if base_frame is not None:
+            self.base_frame = normalize_frame(base_frame)
+        elif self.pose_spec.kind == "tf":
+            self.base_frame = self.pose_spec.child
+        else:
+            self.base_frame = track.child if track is not None else DEFAULT_CHILD
+        if self.pose_spec.kind == "tf" and not self._tf.has_path(
+            self.pose_spec.parent, self.base_frame
+        ):
+            reason = (
+                self._tf.no_path_message(self.pose_spec.parent, self.base_frame)
+                if self._tf
+                else "the bag has no /tf or /tf_static"
+            )
+            raise PlayerError(
+                f"pose source tf:{self.pose_spec.parent}>{self.base_frame}: {reason}; choose "
+                f"another --pose-source (odom, pose, tum:FILE or none)"
+            )
+        if track is not None and track.child != self.base_frame:
+            # Odometry names its own child frame; bridge it to the chosen base frame via tf.
+            if self._tf.has_path(track.child, self.base_frame):
+                self._compose_track = True
+            else:
+                self.warnings.append(
+                    f"no tf between the pose source's frame {track.child!r} and base frame "
+                    f"{self.base_frame!r}: its poses are used as {self.base_frame!r} poses"
+                )
+                self._track = dataclasses.replace(track, child=self.base_frame)
+
+        # Decide the sensor mounting now so a missing tf link fails before any frame is sent.
+        frame_id = normalize_frame(self._first_message(self.sensor_topic).header.frame_id)
+        self._mounts: dict[str, np.ndarray | None] = {frame_id: self._mount_policy(frame_id)}
+        self._first.clear()  # detection's first messages (whole clouds) are not needed again
+
+    # --- sensor topic -------------------------------------------------------------------------
+
+    def _find_topic(self, name: str) -> str | None:
+        """The bag's spelling of a topic, matching with or without the leading '/'."""
+        wanted = name.lstrip("/")
+        return next((t for t in self._topics if t.lstrip("/") == wanted), None)
+
+    def _listing(self) -> str:
+        return ", ".join(f"{n} ({i.msgtype})" for n, i in sorted(self._topics.items())) or "none"
+
+    def _first_message(self, topic: str) -> Any:
+        """Deserialize a topic's first message (cached); None if it has none."""
+        if topic not in self._first:
+            stream = self._messages(self._topics[topic].connections)
+            item = next(stream, None)
+            stream.close()
+            self._first[topic] = None if item is None else item[2]
+        return self._first[topic]
+
+    def _camera_info_topic(self, image_topic: str) -> str | None:
+        """The CameraInfo topic beside a depth image topic (same namespace), if any."""
+        namespace = _namespace(image_topic)
+        return next(
+            (
+                name
+                for name, info in sorted(self._topics.items())
+                if info.msgtype == CAMERA_INFO and _namespace(name) == namespace
+            ),
+            None,
+        )
+
+    def _rejection(self, topic: str) -> str | None:
+        """Why a topic cannot be the sensor, or None if it can."""
+        msgtype = self._topics[topic].msgtype
+        if msgtype not in {POINTCLOUD2, IMAGE, LASERSCAN}:
+            return f"{msgtype} is not a supported sensor type"
+        first = self._first_message(topic)
+        if first is None:
+            return "it has no messages"
+        if msgtype == POINTCLOUD2 and first.height <= 1:
+            return (
+                f"it is an unorganized PointCloud2 (height {first.height}, width {first.width}); "
+                f"the detector needs organized rows"
+            )
+        if msgtype == IMAGE:
+            if first.encoding not in SUPPORTED_ENCODINGS:
+                return (
+                    f"its encoding {first.encoding!r} is not a depth encoding "
+                    f"({'/'.join(SUPPORTED_ENCODINGS)})"
+                )
+            if self._camera_info_topic(topic) is None:
+                return f"no {CAMERA_INFO} topic in its namespace '/{_namespace(topic)}'"
+        return None
+
+    def _resolve_sensor(self, requested: str | None) -> str:
+        """Pick the sensor topic: the requested one if usable, else the only candidate."""
+        if requested is not None:
+            topic = self._find_topic(requested)
+            if topic is None:
+                raise PlayerError(
+                    f"sensor topic {requested!r} is not in {self.path} (topics: {self._listing()})"
+                )
+            if (reason := self._rejection(topic)) is not None:
+                raise PlayerError(f"sensor topic {topic!r} cannot be used: {reason}")
+            return topic
+        sensor_types = {POINTCLOUD2, IMAGE, LASERSCAN}
+        considered = [n for n, i in sorted(self._topics.items()) if i.msgtype in sensor_types]
+        reasons = {topic: self._rejection(topic) for topic in considered}
+        candidates = [topic for topic, reason in reasons.items() if reason is None]
+        if len(candidates) == 1:
+            return candidates[0]
+        if candidates:
+            listed = ", ".join(f"{t} ({self._topics[t].msgtype})" for t in candidates)
+            raise PlayerError(
+                f"several sensor topics in {self.path}: {listed}; choose one with --sensor-topic"
+            )
+        rejected = "".join(f"; {t} rejected: {r}" for t, r in reasons.items())
+        raise PlayerError(
+            f"no usable sensor topic in {self.path} (supported: {SUPPORTED_SENSORS}){rejected}; "
+            f"bag topics: {self._listing()}"
+        )
+
+    def _decoder(self, camera_info: Any) -> Decoder:
+        """The function turning one sensor message into an (h, w, 3) grid."""
+        if self.sensor_type == POINTCLOUD2:
+            return pointcloud2_to_xyz
+        if self.sensor_type == LASERSCAN:
+            return laserscan_to_xyz
+        return lambda image: depth_image_to_xyz(image, camera_info)
+
+    # --- first pass: tf, poses, camera info ---------------------------------------------------
+
+    def _load_first_pass(self, child: str) -> Any:
+        """Read tf, the pose topic and the first CameraInfo in one pass; return the CameraInfo.
+
+        Args:
+            child: Robot frame of poses whose source does not name one.
+        """
+        spec = self.pose_spec
+        pose_topic = None
+        if spec.kind in {"odom", "pose"}:
+            pose_topic = resolve_pose_topic(
+                spec, {name: info.msgtype or "" for name, info in self._topics.items()}
+            )
+        info_topic = (
+            self._camera_info_topic(self.sensor_topic) if self.sensor_type == IMAGE else None
+        )
+        tf_topics = {
+            name: TF_TOPICS[name.lstrip("/")]
+            for name, info in self._topics.items()
+            if name.lstrip("/") in TF_TOPICS and info.msgtype in TF_TYPES
+        }
+        wanted = [*tf_topics, *filter(None, (pose_topic, info_topic))]
+        connections = [c for name in wanted for c in self._topics[name].connections]
+
+        camera_info = None
+        poses: list[Pose2D] = []
+        invalid: list[str] = []
+        for connection, receive_ns, msg in self._messages(connections):
+            topic = connection.topic
+            if topic in tf_topics:
+                self._add_tf(msg, static=tf_topics[topic], invalid=invalid)
+            elif topic == pose_topic:
+                poses.append(pose_from_message(msg, receive_ns, child))
+            elif camera_info is None:
+                camera_info = msg
+        if invalid:
+            self.warnings.append(f"ignored {len(invalid)} invalid tf transforms, e.g. {invalid[0]}")
+        if spec.path is not None:
+            self._track = load_tum(spec.path, child=child)
+        elif pose_topic is not None:
+            if not poses:
+                raise PlayerError(f"pose source {spec}: topic {pose_topic!r} has no messages")
+            self._track = PoseTrack.from_poses(poses)
+        if info_topic is not None and camera_info is None:
+            raise PlayerError(f"camera info topic {info_topic!r} has no messages")
+        return camera_info
+
+    def _add_tf(self, msg: Any, *, static: bool, invalid: list[str]) -> None:
+        """Add a TFMessage's transforms; unusable ones are collected, not fatal (as in tf2)."""
+        for transform in msg.transforms:
+            t, q = transform.transform.translation, transform.transform.rotation
+            stamp = transform.header.stamp.sec + transform.header.stamp.nanosec * 1e-9
+            try:
+                self._tf.add_transform(
+                    transform.header.frame_id,
+                    transform.child_frame_id,
+                    stamp,
+                    (t.x, t.y, t.z),
+                    (q.x, q.y, q.z, q.w),
+                    static=static,
+                )
+            except TfError as err:
+                invalid.append(str(err))
+
+    # --- per frame ----------------------------------------------------------------------------
+
+    def _mount(self, frame_id: str, stamp: float) -> np.ndarray:
+        """T_base_sensor for a sensor frame, deciding once per frame name how to obtain it."""
+        if frame_id not in self._mounts:
+            self._mounts[frame_id] = self._mount_policy(frame_id)
+        fixed = self._mounts[frame_id]
+        if fixed is not None:
+            return fixed.copy()
+        # Mounting chains are rigid in practice even when published on /tf, so clamp to the
+        # nearest sample rather than fail at the ends of the recording.
+        return self._tf.lookup(self.base_frame, frame_id, stamp, tolerance=math.inf)
+
+    def _mount_policy(self, frame_id: str) -> np.ndarray | None:
+        """Identity when no tf is needed or none can exist; None to look the mount up in tf."""
+        if frame_id == self.base_frame:
+            return np.eye(4)
+        if not frame_id:
+            self.warnings.append(
+                f"sensor messages on {self.sensor_topic} have no frame_id; assuming they are in "
+                f"base frame {self.base_frame!r}"
+            )
+            return np.eye(4)
+        if self._tf.has_path(self.base_frame, frame_id):
+            return None
+        if self.pose_spec.kind == "none" or not self._tf:
+            why = "the bag has no tf" if not self._tf else "pose source is none"
+            self.warnings.append(
+                f"no tf from sensor frame {frame_id!r} to base frame {self.base_frame!r} "
+                f"({why}): using an identity sensor mounting"
+            )
+            return np.eye(4)
+        raise PlayerError(
+            f"no tf chain from sensor frame {frame_id!r} to base frame {self.base_frame!r}: "
+            f"{self._tf.no_path_message(self.base_frame, frame_id)}"
+        )
+
+    def _pose_at(self, stamp: float) -> Pose2D | None:
+        """The base frame's pose at a sensor stamp, or None where the source does not cover it."""
+        spec = self.pose_spec
+        if spec.kind == "tf":
+            try:
+                matrix = self._tf.lookup(
+                    spec.parent, self.base_frame, stamp, tolerance=POSE_TOLERANCE
+                )
+            except TfError:
+                return None
+            return pose_from_matrix(matrix, stamp, spec.parent, self.base_frame)
+        if self._track is None:
+            return None
+        pose = self._track.at(stamp, tolerance=POSE_TOLERANCE)
+        if pose is None or not self._compose_track:
+            return pose
+        child_base = self._tf.lookup(pose.child, self.base_frame, stamp, tolerance=math.inf)
+        moved = pose_from_matrix(
+            _planar_matrix(pose) @ child_base, stamp, pose.frame, self.base_frame
+        )
+        return dataclasses.replace(moved, cov=pose.cov)
+
+    def _messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, Any]]:
+        """Deserialized messages of some connections in bag order; errors become PlayerError."""
+        connections = list(connections)
+        if not connections:
+            return
+        try:
+            for connection, receive_ns, raw in self._reader.messages(connections=connections):
+                yield connection, receive_ns, self._reader.deserialize(raw, connection.msgtype)
+        except Exception as err:  # damaged chunks surface as assorted library errors
+            raise _unreadable(self.path, err) from err
+
+    def frames(self) -> Iterator[tuple[SensorFrame, Pose2D | None]]:
+        """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
+
+        Raises:
+            PlayerError: A message cannot be read or decoded (its index is named).
+        """
+        connections = self._topics[self.sensor_topic].connections
+        for index, (_, receive_ns, msg) in enumerate(self._messages(connections)):
+            stamp = header_stamp(msg.header, receive_ns)
+            frame_id = normalize_frame(msg.header.frame_id)
+            try:
+                points = self._decode(msg)
+                mount = self._mount(frame_id, stamp)
+            except PlayerError as err:
+                raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
+            yield SensorFrame(stamp, frame_id, points, mount), self._pose_at(stamp)
+
+    # --- bookkeeping --------------------------------------------------------------------------
+
+    @property
+    def frame_count(self) -> int:
+        """Number of sensor messages, for progress reporting."""
+        return sum(c.msgcount for c in self._topics[self.sensor_topic].connections)
+
+    def __len__(self) -> int:
+        """Number of sensor messages (``frame_count``)."""
+        return self.frame_count
+
+    @property
+    def duration(self) -> float:
+        """Time between the bag's first and last message, seconds."""
+        return self._reader.duration * 1e-9
+
+    def close(self) -> None:
+        """Close the bag; safe to call twice."""
+        if self._reader.stack is not None:
+            self._reader.close()
+
+    def __enter__(self) -> Self:
+        """Use as ``with BagSource(path) as source:`` to close the bag afterwards."""
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        """Close the bag."""
+        self.close()

@@ -1,0 +1,312 @@
+"""Where the robot's pose comes from: the ``--pose-source`` spec, pose tracks and TUM files.
+
+Bags carry the robot pose in different ways (a tf chain, an odometry topic, a localizer's pose
+topic) and some carry none, so the user picks one with a short spec. Poses are reduced to the
+plane (x, y, yaw) because the mapper works on a planar robot.
+"""
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.frames import Pose2D, header_stamp
+from wallmap.services.player.tf_buffer import normalize_frame
+
+ACCEPTED_FORMS = "tf, tf:PARENT>CHILD, odom, odom:TOPIC, pose, pose:TOPIC, tum:FILE, none"
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+DEFAULT_PARENT = "map"
+DEFAULT_CHILD = "base_link"
+# Indices of x, y and yaw (rotation about z) in ROS's row-major 6x6 pose covariance.
+_PLANAR = np.ix_([0, 1, 5], [0, 1, 5])
+
+PoseSourceKind = Literal["tf", "odom", "pose", "tum", "none"]
+
+
+@dataclass(frozen=True)
+class PoseSourceSpec:
+    """A parsed ``--pose-source`` value.
+
+    Attributes:
+        kind: Which source: a tf chain, an odometry topic, a pose topic, a TUM file, or none.
+        parent: Fixed frame of a tf source.
+        child: Robot frame of a tf source.
+        topic: Topic of an odom/pose source; None means "detect it in the bag".
+        path: File of a tum source.
+    """
+
+    kind: PoseSourceKind
+    parent: str = DEFAULT_PARENT
+    child: str = DEFAULT_CHILD
+    topic: str | None = None
+    path: Path | None = None
+
+    def __str__(self) -> str:
+        """The canonical spec, for logs and error messages."""
+        if self.kind == "tf":
+            return f"tf:{self.parent}>{self.child}"
+        if self.kind == "tum":
+            return f"tum:{self.path}"
+        if self.topic is not None:
+            return f"{self.kind}:{self.topic}"
+        return self.kind
+
+
+def parse_pose_source(spec: str) -> PoseSourceSpec:
+    """Parse a ``--pose-source`` value.
+
+    Args:
+        spec: One of tf, tf:PARENT>CHILD, odom, odom:TOPIC, pose, pose:TOPIC, tum:FILE, none.
+
+    Returns:
+        The parsed spec (``tf`` means ``tf:map>base_link``).
+
+    Raises:
+        PlayerError: The spec matches none of the accepted forms.
+    """
+    text = spec.strip()
+    kind, colon, argument = text.partition(":")
+    argument = argument.strip()
+    if kind == "none" and not colon:
+        return PoseSourceSpec("none")
+    if kind == "tf" and not colon:
+        return PoseSourceSpec("tf")
+    if kind == "tf" and (match := re.fullmatch(r"([^>\s]+)\s*>\s*([^>\s]+)", argument)):
+        parent, child = normalize_frame(match[1]), normalize_frame(match[2])
+        if parent and child and parent != child:
+            return PoseSourceSpec("tf", parent=parent, child=child)
+    if kind in {"odom", "pose"} and not colon:
+        return PoseSourceSpec(kind)
+    if kind in {"odom", "pose"} and argument and not any(c.isspace() for c in argument):
+        return PoseSourceSpec(kind, topic=argument)
+    if kind == "tum" and argument:
+        return PoseSourceSpec("tum", path=Path(argument))
+    raise PlayerError(f"invalid pose source {spec!r}; accepted forms: {ACCEPTED_FORMS}")
+
+
+def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str:
+    """Pick the bag topic an odom/pose source reads.
+
+    Args:
+        spec: A spec of kind ``odom`` or ``pose``.
+        topics: The bag's topic names mapped to their message types.
+
+    Returns:
+        The topic name as spelled in the bag (a leading '/' may differ from the spec's).
+
+    Raises:
+        PlayerError: The named topic is absent or of the wrong type, or detection finds no
+            suitable topic (or, for ``pose``, several).
+    """
+    wanted = (ODOMETRY_TYPE,) if spec.kind == "odom" else POSE_TYPES
+    listing = ", ".join(f"{name} ({kind})" for name, kind in sorted(topics.items())) or "none"
+    if spec.topic is not None:
+        name = next((t for t in topics if t.lstrip("/") == spec.topic.lstrip("/")), None)
+        if name is None:
+            raise PlayerError(
+                f"pose source {spec}: the bag has no topic {spec.topic!r} (topics: {listing})"
+            )
+        if topics[name] not in wanted:
+            raise PlayerError(
+                f"pose source {spec}: topic {name!r} is {topics[name]}, expected "
+                f"{' or '.join(wanted)}"
+            )
+        return name
+    matches = sorted(name for name, kind in topics.items() if kind in wanted)
+    if not matches:
+        raise PlayerError(
+            f"pose source {spec}: the bag has no {' or '.join(wanted)} topic (topics: {listing})"
+        )
+    if spec.kind == "pose" and len(matches) > 1:
+        raise PlayerError(
+            f"pose source pose: several pose topics ({', '.join(matches)}); "
+            f"choose one with pose:TOPIC"
+        )
+    return matches[0]
+
+
+def yaw_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> float:
+    """Heading about z of a rotation, assuming the robot stays level (planar motion)."""
+    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def planar_covariance(covariance: Any) -> np.ndarray | None:
+    """The (x, y, yaw) block of a ROS 6x6 pose covariance; None when it is all zero (unset)."""
+    full = np.asarray(covariance, dtype=np.float64).reshape(6, 6)
+    if not full.any():
+        return None
+    return full[_PLANAR]
+
+
+def pose_from_matrix(matrix: np.ndarray, stamp: float, frame: str, child: str) -> Pose2D:
+    """Reduce a 4x4 tf transform (frame <- child) to a planar pose."""
+    yaw = math.atan2(float(matrix[1, 0]), float(matrix[0, 0]))
+    return Pose2D(stamp, float(matrix[0, 3]), float(matrix[1, 3]), yaw, None, frame, child)
+
+
+def pose_from_message(msg: Any, receive_time_ns: int, child: str) -> Pose2D:
+    """Reduce an Odometry, PoseStamped or PoseWithCovarianceStamped message to a planar pose.
+
+    Args:
+        msg: The deserialized message.
+        receive_time_ns: Bag receive time, used when the header stamp is zero.
+        child: Robot frame to report when the message does not name one (only Odometry does).
+
+    Returns:
+        The pose, with the x/y/yaw covariance when the message carries a non-zero one.
+    """
+    stamp = header_stamp(msg.header, receive_time_ns)
+    if msg.__msgtype__ == "geometry_msgs/msg/PoseStamped":
+        pose, cov = msg.pose, None
+    else:
+        pose, cov = msg.pose.pose, planar_covariance(msg.pose.covariance)
+    if msg.__msgtype__ == ODOMETRY_TYPE and msg.child_frame_id:
+        child = normalize_frame(msg.child_frame_id)
+    q = pose.orientation
+    return Pose2D(
+        stamp,
+        float(pose.position.x),
+        float(pose.position.y),
+        yaw_from_quaternion(q.x, q.y, q.z, q.w),
+        cov,
+        normalize_frame(msg.header.frame_id) or DEFAULT_PARENT,
+        child,
+    )
+
+
+def _wrap(angle: np.ndarray | float) -> Any:
+    """Wrap angles into [-pi, pi)."""
+    return (np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True, eq=False)
+class PoseTrack:
+    """A time-sorted planar trajectory, interpolated at sensor stamps.
+
+    Attributes:
+        stamps: Strictly increasing sample times, float seconds.
+        x: Positions along x, metres.
+        y: Positions along y, metres.
+        yaw: Headings, radians.
+        cov: (n, 3, 3) x/y/yaw covariances, NaN where a sample has none; None if none has one.
+        frame: Fixed frame of the poses.
+        child: Robot frame the poses describe.
+    """
+
+    stamps: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+    cov: np.ndarray | None
+    frame: str = DEFAULT_PARENT
+    child: str = DEFAULT_CHILD
+
+    @classmethod
+    def from_poses(cls, poses: list[Pose2D]) -> "PoseTrack":
+        """Build a track from poses in any order; a repeated stamp keeps its last pose.
+
+        Raises:
+            PlayerError: No poses.
+        """
+        if not poses:
+            raise PlayerError("the pose source holds no poses")
+        stamps = np.array([p.stamp for p in poses], dtype=np.float64)
+        order = np.argsort(stamps, kind="stable")
+        stamps = stamps[order]
+        keep = order[np.append(stamps[1:] != stamps[:-1], True)]
+        cov = None
+        if any(p.cov is not None for p in poses):
+            cov = np.stack(
+                [
+                    poses[i].cov if poses[i].cov is not None else np.full((3, 3), np.nan)
+                    for i in keep
+                ]
+            )
+        return cls(
+            stamps=np.array([poses[i].stamp for i in keep]),
+            x=np.array([poses[i].x for i in keep]),
+            y=np.array([poses[i].y for i in keep]),
+            yaw=np.array([poses[i].yaw for i in keep]),
+            cov=cov,
+            frame=poses[0].frame,
+            child=poses[0].child,
+        )
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return int(self.stamps.size)
+
+    def at(self, stamp: float, *, tolerance: float = 0.05) -> Pose2D | None:
+        """Interpolate the pose at ``stamp``.
+
+        Position and covariance interpolate linearly, yaw along the shorter way round the circle.
+        Within ``tolerance`` seconds outside the track the end sample is used.
+
+        Args:
+            stamp: Query time, float seconds.
+            tolerance: How far outside [first, last] a stamp may lie and still get a pose.
+
+        Returns:
+            The pose stamped ``stamp``, or None when the track does not cover it.
+        """
+        stamps = self.stamps
+        if not stamps[0] - tolerance <= stamp <= stamps[-1] + tolerance:
+            return None
+        upper = int(np.searchsorted(stamps, stamp, side="right"))
+        lower = max(upper - 1, 0)
+        upper = min(upper, stamps.size - 1)
+        span = stamps[upper] - stamps[lower]
+        weight = min(max((stamp - stamps[lower]) / span, 0.0), 1.0) if span > 0 else 0.0
+        x = self.x[lower] + (self.x[upper] - self.x[lower]) * weight
+        y = self.y[lower] + (self.y[upper] - self.y[lower]) * weight
+        yaw = _wrap(self.yaw[lower] + _wrap(self.yaw[upper] - self.yaw[lower]) * weight)
+        cov = None
+        if self.cov is not None:
+            mixed = self.cov[lower] + (self.cov[upper] - self.cov[lower]) * weight
+            cov = None if np.isnan(mixed).any() else mixed
+        return Pose2D(float(stamp), float(x), float(y), float(yaw), cov, self.frame, self.child)
+
+
+def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CHILD) -> PoseTrack:
+    """Read a TUM trajectory file (``t x y z qx qy qz qw`` per line, ``#`` comments).
+
+    Args:
+        path: The file.
+        frame: Fixed frame to report the poses in (TUM files do not name one).
+        child: Robot frame the poses describe.
+
+    Returns:
+        The planar track.
+
+    Raises:
+        PlayerError: The file is unreadable, a line is malformed (its number is given), or the
+            file holds no poses.
+    """
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise PlayerError(f"cannot read TUM pose file {path}: {err}") from err
+    poses = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        content = line.split("#", 1)[0].strip()
+        if not content:
+            continue
+        try:
+            values = [float(v) for v in content.replace(",", " ").split()]
+        except ValueError:
+            values = []
+        if len(values) != 8 or not all(math.isfinite(v) for v in values):
+            raise PlayerError(
+                f"TUM pose file {path} line {number}: expected 8 numbers "
+                f"'t x y z qx qy qz qw', got {content!r}"
+            )
+        t, x, y, _, qx, qy, qz, qw = values
+        poses.append(Pose2D(t, x, y, yaw_from_quaternion(qx, qy, qz, qw), None, frame, child))
+    if not poses:
+        raise PlayerError(f"TUM pose file {path} holds no poses")
+    return PoseTrack.from_poses(poses)

@@ -1,0 +1,184 @@
+import math
+
+import numpy as np
+import pytest
+
+from wallmap.common.evaluation import evaluate_map, mapped_line
+from wallmap.common.scene import FloorPlan, Wall, generate_floorplan
+
+
+def as_mapped(p0, p1, wall_id=None):
+    """A mapped wall dict for the segment p0→p1: (u, v) is its line's closest point to 0."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    d = (p1 - p0) / np.linalg.norm(p1 - p0)
+    closest = p0 - (p0 @ d) * d
+    wall = {"u": float(closest[0]), "v": float(closest[1]), "p0": p0.tolist(), "p1": p1.tolist()}
+    if wall_id is not None:
+        wall["id"] = wall_id
+    return wall
+
+
+def shifted(wall, distance):
+    p0, p1 = np.asarray(wall.p0), np.asarray(wall.p1)
+    d = (p1 - p0) / np.linalg.norm(p1 - p0)
+    n = np.array([-d[1], d[0]])
+    return as_mapped(p0 + distance * n, p1 + distance * n)
+
+
+def rotated(wall, degrees):
+    p0, p1 = np.asarray(wall.p0), np.asarray(wall.p1)
+    mid = (p0 + p1) / 2
+    a = math.radians(degrees)
+    r = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    return as_mapped(mid + r @ (p0 - mid), mid + r @ (p1 - mid))
+
+
+SQUARE = FloorPlan(
+    walls=(
+        Wall(0, (1.0, -2.0), (5.0, -2.0)),
+        Wall(1, (5.0, -2.0), (5.0, 2.0)),
+        Wall(2, (5.0, 2.0), (1.0, 2.0)),
+        Wall(3, (1.0, 2.0), (1.0, -2.0), glass=True),
+    )
+)
+ALL_SEEN = {0: 10, 1: 10, 2: 10, 3: 10}
+
+
+def test_perfect_map_of_a_generated_plan_scores_one():
+    plan = generate_floorplan(4)
+    mapped = [as_mapped(w.p0, w.p1, w.id) for w in plan.walls if not w.glass]
+    seen = {w.id: 20 for w in plan.walls}
+
+    score = evaluate_map(mapped, plan, seen)
+
+    assert score.precision == 1.0
+    assert score.recall == 1.0
+    assert score.duplicates == 0
+    assert score.median_angle_deg == pytest.approx(0.0, abs=1e-6)
+    assert score.median_offset_m == pytest.approx(0.0, abs=1e-9)
+    assert score.n_true == sum(not w.glass for w in plan.walls)
+    assert score.unmatched_mapped == []
+    assert score.unmatched_true == []
+    assert "precision 1.000" in score.summary()
+
+
+def test_shift_of_20_cm_does_not_match_but_10_cm_does():
+    far = evaluate_map([shifted(SQUARE.walls[1], 0.20)], SQUARE, ALL_SEEN)
+    near = evaluate_map([shifted(SQUARE.walls[1], -0.10)], SQUARE, ALL_SEEN)
+
+    assert far.precision == 0.0
+    assert far.unmatched_mapped == [0]
+    assert 1 in far.unmatched_true
+    assert near.precision == 1.0
+    assert near.median_offset_m == pytest.approx(0.10)
+    assert near.recall == pytest.approx(1 / 3)
+
+
+def test_angle_limit_is_five_degrees():
+    tilted = evaluate_map([rotated(SQUARE.walls[0], 4.0)], SQUARE, ALL_SEEN)
+    too_tilted = evaluate_map([rotated(SQUARE.walls[0], 6.0)], SQUARE, ALL_SEEN)
+
+    assert tilted.precision == 1.0
+    assert tilted.median_angle_deg == pytest.approx(4.0)
+    # Rotated about the midpoint, the mapped line passes through the overlap's middle.
+    assert tilted.median_offset_m == pytest.approx(0.0, abs=1e-9)
+    assert too_tilted.precision == 0.0
+
+
+def test_duplicate_walls_are_counted_and_best_match_is_reported():
+    mapped = [
+        as_mapped((1.0, -2.0), (5.0, -2.0)),
+        shifted(SQUARE.walls[0], 0.05),
+        as_mapped((5.0, -2.0), (5.0, 2.0)),
+    ]
+
+    score = evaluate_map(mapped, SQUARE, ALL_SEEN)
+
+    assert score.duplicates == 1
+    assert score.precision == 1.0
+    assert score.median_offset_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_extents_must_overlap():
+    beyond_the_end = as_mapped((5.5, -2.0), (7.0, -2.0))
+    touching_the_end = as_mapped((4.0, -2.0), (7.0, -2.0))
+
+    assert evaluate_map([beyond_the_end], SQUARE, ALL_SEEN).precision == 0.0
+    assert evaluate_map([touching_the_end], SQUARE, ALL_SEEN).precision == 1.0
+
+
+def test_offset_is_measured_at_the_middle_of_the_overlap():
+    # Tilted 3 degrees about the wall's start (1, -2) and 1 m long: the overlap's middle
+    # is 0.5 m along, 0.5 * sin(3 deg) = 2.6 cm from the mapped line; the true wall's far
+    # end would be 21 cm away.
+    a = math.radians(3.0)
+    short = as_mapped((1.0, -2.0), (2.0, -2.0 + math.tan(a)))
+
+    score = evaluate_map([short], SQUARE, ALL_SEEN)
+
+    assert score.precision == 1.0
+    assert score.median_offset_m == pytest.approx(0.5 * math.sin(a))
+
+
+def test_wall_through_origin_uses_end_points_for_direction():
+    plan = FloorPlan(walls=(Wall(0, (-2.0, -2.0), (2.0, 2.0)),))
+    mapped = {"u": 0.0, "v": 0.0, "p0": [-1.0, -1.0], "p1": [1.5, 1.5], "id": "a"}
+    slightly_off = {"u": 1e-4, "v": -1e-4, "p0": [-1.0, -1.0], "p1": [1.5, 1.5], "id": "b"}
+
+    score = evaluate_map([mapped, slightly_off], plan, {0: 5})
+
+    assert score.precision == 1.0
+    assert score.recall == 1.0
+    assert score.duplicates == 1
+    assert score.median_angle_deg == pytest.approx(0.0, abs=1e-6)
+    direction, offset = mapped_line(mapped)
+    assert abs(direction @ np.array([1.0, 1.0])) == pytest.approx(math.sqrt(2))
+    assert offset == 0.0
+
+
+def test_parallel_line_through_origin_is_not_the_wall():
+    # The true wall lies on y = 1; a mapped wall on y = 0 (through the origin) is 1 m off.
+    plan = FloorPlan(walls=(Wall(0, (-2.0, 1.0), (2.0, 1.0)),))
+    mapped = {"u": 0.0, "v": 0.0, "p0": [-1.0, 0.0], "p1": [1.0, 0.0]}
+
+    assert evaluate_map([mapped], plan, {0: 5}).precision == 0.0
+
+
+def test_glass_and_rarely_seen_walls_are_not_required():
+    mapped = [as_mapped(w.p0, w.p1) for w in SQUARE.walls[:3]]
+    seen = {0: 10, 1: 2, 2: 10, 3: 10}
+
+    score = evaluate_map(mapped, SQUARE, seen)
+
+    assert score.n_true == 2  # wall 1 seen too rarely, wall 3 is glass
+    assert score.recall == 1.0
+    assert score.precision == 1.0  # matching a rarely seen wall is still correct
+
+
+def test_mapping_glass_is_a_false_positive():
+    score = evaluate_map([as_mapped((1.0, 2.0), (1.0, -2.0))], SQUARE, ALL_SEEN)
+
+    assert score.precision == 0.0
+    assert score.recall == 0.0
+    assert score.unmatched_true == [0, 1, 2]
+
+
+def test_empty_map():
+    score = evaluate_map([], SQUARE, ALL_SEEN)
+
+    assert score.precision == 1.0
+    assert score.n_mapped == 0
+    assert score.recall == 0.0
+    assert math.isnan(score.median_angle_deg)
+    assert math.isnan(score.median_offset_m)
+
+
+def test_one_long_mapped_wall_over_two_collinear_walls_counts_once():
+    plan = FloorPlan(walls=(Wall(0, (0.0, 3.0), (2.0, 3.0)), Wall(1, (2.0, 3.0), (4.0, 3.0))))
+
+    score = evaluate_map([as_mapped((0.0, 3.0), (4.0, 3.0))], plan, {0: 5, 1: 5})
+
+    assert score.n_mapped_matched == 1
+    assert score.precision == 1.0
+    assert score.recall == 1.0
+    assert score.duplicates == 0

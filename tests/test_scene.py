@@ -1,0 +1,540 @@
+import json
+import math
+import time
+from collections import Counter, defaultdict
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from wallmap.common.scene import (
+    CAMERA_INFO_TOPIC,
+    GROUND_TRUTH_TOPIC,
+    IMAGE_TOPIC,
+    ODOM_TOPIC,
+    POINTS_TOPIC,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    Camera,
+    FloorPlan,
+    Furniture,
+    Wall,
+    clearance,
+    depth_to_points,
+    drifting_odometry,
+    generate_floorplan,
+    generate_trajectory,
+    load_truth,
+    render_depth,
+    stamp_to_ns,
+    walls_seen,
+    write_scene_bag,
+)
+from wallmap.common.scene.floorplan import segment_distances
+
+SEEDS = [0, 1, 2, 3, 11, 42]
+
+
+def wall_angles_deg(plan):
+    return np.array(
+        [math.degrees(math.atan2(w.p1[1] - w.p0[1], w.p1[0] - w.p0[0])) for w in plan.walls]
+    )
+
+
+def doorway_centres(plan):
+    """Jamb ends are the only wall ends not shared with another wall; they come in pairs."""
+    ends = Counter(p for w in plan.walls for p in (w.p0, w.p1))
+    free = np.array([p for p, k in ends.items() if k == 1])
+    centres = []
+    for i, p in enumerate(free):
+        j = np.argsort(np.linalg.norm(free - p, axis=1))[1]
+        if i < j:
+            centres.append((p + free[j]) / 2)
+    return np.array(centres)
+
+
+def se2(x, y, yaw):
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def quat_yaw(q):
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def quat_matrix(q):
+    x, y, z, w = q.x, q.y, q.z, q.w
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def header_ns(header):
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+def read_bag(path):
+    """Messages per topic as (bag time ns, message), and the message type per topic."""
+    messages, types = defaultdict(list), {}
+    with AnyReader([path]) as reader:
+        for connection in reader.connections:
+            types[connection.topic] = connection.msgtype
+        for connection, ns, raw in reader.messages():
+            messages[connection.topic].append((ns, reader.deserialize(raw, connection.msgtype)))
+    return messages, types
+
+
+def bag_path(tmp_path, fmt, name="scene"):
+    return tmp_path / (f"{name}.bag" if fmt == "ros1" else name)
+
+
+# --- floor plans ---------------------------------------------------------------------------
+
+
+def test_plans_are_deterministic_and_differ_by_seed():
+    assert generate_floorplan(7) == generate_floorplan(7)
+    assert generate_floorplan(7).to_json() != generate_floorplan(8).to_json()
+    plan = generate_floorplan(7)
+    assert FloorPlan.from_json(json.loads(json.dumps(plan.to_json()))) == plan
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_plans_are_non_manhattan_and_well_formed(seed):
+    plan = generate_floorplan(seed, n_rooms=3)
+
+    # Relative angles, so the random global rotation does not count.
+    relative = (wall_angles_deg(plan) - wall_angles_deg(plan)[0]) % 90.0
+    assert np.sum((relative > 10.0) & (relative < 80.0)) >= 3
+    lengths = np.array([w.length for w in plan.walls])
+    assert lengths.min() >= 1.0
+    assert lengths.max() <= 8.0
+    assert len({w.id for w in plan.walls}) == len(plan.walls)
+    assert any(w.glass for w in plan.walls)
+    assert len(doorway_centres(plan)) == 2  # three rooms in a row
+    starts = np.array([w.p0 for w in plan.walls])
+    ends = np.array([w.p1 for w in plan.walls])
+    gaps = segment_distances(starts, ends, starts, ends)
+    shares_end = np.zeros_like(gaps, dtype=bool)
+    for u in (starts, ends):
+        for v in (starts, ends):
+            shares_end |= np.all(u[:, None] == v[None], axis=2)
+    assert gaps[~shares_end].min() > 0.2  # walls meet only at corners
+    assert plan.furniture
+    for box in plan.furniture:
+        assert 0.4 <= box.height <= 1.1
+    assert plan.route[0] == (0.0, 0.0)
+
+
+def test_more_rooms_make_more_doorways():
+    assert len(doorway_centres(generate_floorplan(5, n_rooms=5))) == 4
+
+
+# --- trajectories --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_trajectory_drives_through_all_rooms_with_clearance(seed):
+    plan = generate_floorplan(seed)
+    traj = generate_trajectory(plan, seed, rate_hz=15.0)
+    xy = np.column_stack([traj.x, traj.y])
+
+    assert len(traj) >= 600  # 40 s of driving at 15 Hz
+    assert clearance(plan, xy).min() >= 0.6
+    for centre in doorway_centres(plan):
+        assert np.linalg.norm(xy - centre, axis=1).min() < 0.03
+    np.testing.assert_allclose(np.diff(traj.stamps), 1 / 15, atol=1e-6)
+
+
+def test_trajectory_is_smooth_and_sweeps_the_view():
+    plan = generate_floorplan(3)
+    traj = generate_trajectory(plan, 3, rate_hz=15.0, speed=0.4)
+    velocity = np.column_stack([np.diff(traj.x), np.diff(traj.y)]) * 15.0
+    speed = np.linalg.norm(velocity, axis=1)
+
+    assert speed[0] < 0.05  # starts from rest
+    assert speed.max() == pytest.approx(0.4, abs=1e-3)
+    # Continuous velocity: the change per frame is bounded by the 0.4 m/s^2 ramps and the
+    # path's curvature.
+    assert np.linalg.norm(np.diff(velocity, axis=0), axis=1).max() < 0.05
+    assert np.abs(np.diff(np.unwrap(traj.yaw))).max() < math.radians(5.0)
+    moving = speed > 0.2
+    heading = np.arctan2(velocity[:, 1], velocity[:, 0])
+    off_heading = np.degrees(np.angle(np.exp(1j * (traj.yaw[1:] - heading))))[moving]
+    assert off_heading.max() > 50.0
+    assert off_heading.min() < -50.0
+    assert np.abs(off_heading).max() < 62.0
+
+
+def test_same_trajectory_at_another_rate():
+    plan = generate_floorplan(2)
+    slow = generate_trajectory(plan, 9, rate_hz=15.0)
+    fast = generate_trajectory(plan, 9, rate_hz=30.0)
+
+    np.testing.assert_allclose(fast.x[::2][: len(slow)], slow.x, atol=1e-9)
+    np.testing.assert_allclose(fast.yaw[::2][: len(slow)], slow.yaw, atol=1e-9)
+
+
+def test_odometry_starts_true_and_drifts():
+    plan = generate_floorplan(1)
+    traj = generate_trajectory(plan, 1)
+    odom = drifting_odometry(traj, 5, drift_xy=0.02, drift_yaw_deg=1.0)
+    error = np.hypot(odom.x - traj.x, odom.y - traj.y)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(traj.x), np.diff(traj.y)))])
+
+    assert odom.pose_at(0) == pytest.approx(traj.pose_at(0))
+    assert error[travelled < 1.0].max() < 0.05
+    assert error[-1] > 0.3
+    yaw_error = np.degrees(np.angle(np.exp(1j * (odom.yaw - traj.yaw))))
+    assert 5.0 < abs(yaw_error[-1]) < 3.0 * travelled[-1]
+    exact = drifting_odometry(traj, 5, drift_xy=0.0, drift_yaw_deg=0.0)
+    np.testing.assert_allclose(exact.x, traj.x, atol=1e-9)
+    np.testing.assert_allclose(exact.yaw, traj.yaw, atol=1e-9)
+
+
+# --- rendering -----------------------------------------------------------------------------
+
+CAMERA = Camera()
+
+
+def wall_ahead(distance, *, glass=False, height=2.6):
+    """One wide wall perpendicular to the view of a robot at the origin facing +x."""
+    x = CAMERA.mount_xyz[0] + distance
+    return FloorPlan(walls=(Wall(7, (x, -6.0), (x, 6.0), glass=glass, height=height),))
+
+
+def test_camera_defaults_are_kinect_like():
+    assert math.degrees(2 * math.atan(CAMERA.width / 2 / CAMERA.fx)) == pytest.approx(57.0)
+    assert math.degrees(2 * math.atan(CAMERA.height / 2 / CAMERA.fy)) == pytest.approx(43.0)
+    big = Camera(width=640, height=480)
+    assert big.fx == pytest.approx(4 * CAMERA.fx)
+    optical = CAMERA.T_base_camera
+    np.testing.assert_allclose(optical[:3, 2], [1, 0, 0], atol=1e-12)  # z looks forward
+    np.testing.assert_allclose(optical[:3, 0], [0, -1, 0], atol=1e-12)  # x to the right
+    np.testing.assert_allclose(optical[:3, 3], [0.1, 0.0, 1.0])
+    up = Camera(tilt_deg=10.0).T_base_camera
+    assert up[2, 2] == pytest.approx(math.sin(math.radians(10.0)))
+
+
+def test_wall_straight_ahead_gives_its_distance():
+    depth, hit = render_depth(wall_ahead(3.0), 0.0, 0.0, 0.0, CAMERA, None)
+
+    assert depth.dtype == np.float32
+    assert hit.dtype == np.int32
+    assert depth.shape == hit.shape == (120, 160)
+    assert depth[60, 80] == pytest.approx(3.0, abs=1e-5)
+    assert hit[60, 80] == 7
+    # A plane facing the camera has the same optical z everywhere.
+    np.testing.assert_allclose(depth[hit == 7], 3.0, atol=1e-5)
+    # Rays steep enough to reach the floor before the wall see the floor.
+    assert (hit[-1] == -1).all()
+    assert depth[-1, 80] < 3.0
+
+
+def test_wall_ahead_after_turning():
+    plan = FloorPlan(walls=(Wall(1, (-6.0, 4.1), (6.0, 4.1)),))  # north of the robot
+    depth, hit = render_depth(plan, 0.0, 0.0, math.pi / 2, CAMERA, None)
+
+    assert depth[60, 80] == pytest.approx(4.0, abs=1e-5)
+    assert hit[60, 80] == 1
+
+
+def test_glass_gives_no_return():
+    depth, hit = render_depth(wall_ahead(3.0, glass=True), 0.0, 0.0, 0.0, CAMERA, None)
+
+    assert np.isnan(depth[60, 80])
+    assert hit[60, 80] == 7
+    assert np.isnan(depth[hit == 7]).all()
+    assert np.isfinite(depth[-1]).all()  # the floor in front of the glass still returns
+
+
+def test_range_limits():
+    far, far_hit = render_depth(wall_ahead(5.5), 0.0, 0.0, 0.0, CAMERA, None)
+    near, _ = render_depth(wall_ahead(0.4), 0.0, 0.0, 0.0, CAMERA, None)
+
+    assert np.isnan(far[60, 80])
+    assert far_hit[60, 80] == -1
+    assert np.isnan(near).all()
+
+
+def test_points_lie_on_a_slanted_wall():
+    plan = FloorPlan(walls=(Wall(3, (1.0, -4.0), (5.0, 2.0), height=2.4),))
+    x, y, yaw = 0.5, 0.2, 0.3
+    depth, hit = render_depth(plan, x, y, yaw, CAMERA, None)
+    points = depth_to_points(depth, CAMERA)[hit == 3].astype(float)
+    mount = CAMERA.T_base_camera
+    base = points @ mount[:3, :3].T + mount[:3, 3]
+    world = base[:, :2] @ se2(x, y, yaw)[:2, :2].T + [x, y]
+
+    assert len(points) > 1000
+    a, b = np.array([1.0, -4.0]), np.array([5.0, 2.0])
+    d = (b - a) / np.linalg.norm(b - a)
+    distance = np.abs((world - a) @ np.array([-d[1], d[0]]))
+    assert distance.max() < 1e-4
+    assert base[:, 2].min() >= -1e-4
+    assert base[:, 2].max() <= 2.4 + 1e-4
+    assert np.isnan(depth_to_points(depth, CAMERA)[np.isnan(depth)]).all()
+
+
+def test_furniture_hides_the_wall_behind_it():
+    box = Furniture(center=(2.0, 0.0), size=(0.6, 1.0), yaw=0.0, height=0.8)
+    plan = FloorPlan(walls=wall_ahead(3.0).walls, furniture=(box,))
+    depth, hit = render_depth(plan, 0.0, 0.0, 0.0, CAMERA, None)
+
+    assert hit[60, 80] == 7  # above the box
+    column = depth[:, 80]
+    box_rows = (hit[:, 80] == -1) & (column < 2.0)
+    assert box_rows.any()
+    # The box's front face is at x = 1.7, i.e. 1.6 m in front of the camera.
+    assert column[box_rows].min() == pytest.approx(1.6, abs=1e-5)
+
+
+def test_depth_noise_grows_with_distance_squared():
+    depth, _ = render_depth(wall_ahead(4.0), 0.0, 0.0, 0.0, CAMERA, np.random.default_rng(1))
+    centre = depth[40:80, 40:120]
+
+    assert np.std(centre) == pytest.approx(CAMERA.noise_k * 16.0, rel=0.1)
+    assert np.mean(centre) == pytest.approx(4.0, abs=0.005)
+
+
+def test_walls_seen_needs_the_height_band():
+    for distance, expected in ((3.0, {7}), (1.2, {7}), (0.7, set())):
+        depth, hit = render_depth(wall_ahead(distance), 0.0, 0.0, 0.0, CAMERA, None)
+        # At 0.7 m the top rows reach only 1.0 + 0.7 tan(21.5 deg) = 1.28 m.
+        assert walls_seen(hit, depth, CAMERA) == expected, distance
+    low, low_hit = render_depth(wall_ahead(3.0, height=1.2), 0.0, 0.0, 0.0, CAMERA, None)
+    assert walls_seen(low_hit, low, CAMERA) == set()
+    glass, glass_hit = render_depth(wall_ahead(3.0, glass=True), 0.0, 0.0, 0.0, CAMERA, None)
+    assert walls_seen(glass_hit, glass, CAMERA) == set()
+
+
+def test_render_is_fast():
+    plan = generate_floorplan(0)
+    traj = generate_trajectory(plan, 0)
+    rng = np.random.default_rng(0)
+    times = []
+    for i in range(0, len(traj), len(traj) // 15):
+        start = time.perf_counter()
+        render_depth(plan, *traj.pose_at(i), CAMERA, rng)
+        times.append(time.perf_counter() - start)
+    assert np.median(times) < 0.05
+
+
+# --- bags ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2-mcap", "ros2-sqlite3"])
+@pytest.mark.parametrize("sensor", ["pointcloud", "depth16", "depth32"])
+def test_bag_round_trip(tmp_path, fmt, sensor):
+    path = bag_path(tmp_path, fmt)
+    info = write_scene_bag(path, seed=3, n_frames=8, fmt=fmt, sensor=sensor)
+    messages, types = read_bag(path)
+
+    assert info.n_frames == 8
+    assert info.truth_path == tmp_path / f"{path.name}.truth.json"
+    expected_types = {
+        TF_STATIC_TOPIC: "tf2_msgs/msg/TFMessage",
+        TF_TOPIC: "tf2_msgs/msg/TFMessage",
+        ODOM_TOPIC: "nav_msgs/msg/Odometry",
+        GROUND_TRUTH_TOPIC: "geometry_msgs/msg/PoseStamped",
+    }
+    if sensor == "pointcloud":
+        expected_types[POINTS_TOPIC] = "sensor_msgs/msg/PointCloud2"
+    else:
+        expected_types[IMAGE_TOPIC] = "sensor_msgs/msg/Image"
+        expected_types[CAMERA_INFO_TOPIC] = "sensor_msgs/msg/CameraInfo"
+    assert types == expected_types
+    sensor_topic = POINTS_TOPIC if sensor == "pointcloud" else IMAGE_TOPIC
+    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, sensor_topic):
+        assert len(messages[topic]) == 8
+    # Odom → base_link at the 8 stamps and the 7 midpoints, map → odom at 10 Hz (5) plus
+    # one at the last stamp so that it can be interpolated up to the end.
+    assert len(messages[TF_TOPIC]) == 15 + 6
+    assert len(messages[TF_STATIC_TOPIC]) == 1
+
+    frame_ns = [stamp_to_ns(s) for s in info.trajectory.stamps]
+    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, sensor_topic):
+        assert [ns for ns, _ in messages[topic]] == frame_ns
+        assert [header_ns(m.header) for _, m in messages[topic]] == frame_ns
+    for ns, msg in messages[GROUND_TRUTH_TOPIC]:
+        i = frame_ns.index(ns)
+        assert msg.header.frame_id == "map"
+        assert (msg.pose.position.x, msg.pose.position.y) == pytest.approx(
+            info.trajectory.pose_at(i)[:2]
+        )
+    if fmt == "ros1":
+        assert [m.header.seq for _, m in messages[ODOM_TOPIC]] == list(range(8))
+
+    camera = Camera()
+    _, msg = messages[sensor_topic][4]
+    assert msg.header.frame_id == "camera_optical_frame"
+    assert (msg.height, msg.width) == (camera.height, camera.width)
+    if sensor == "pointcloud":
+        assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == [
+            ("x", 0, 7, 1),
+            ("y", 4, 7, 1),
+            ("z", 8, 7, 1),
+            ("rgb", 16, 7, 1),
+        ]
+        assert (msg.point_step, msg.row_step, msg.is_dense) == (32, 32 * 160, False)
+        raw = np.frombuffer(msg.data, dtype=np.uint8).reshape(120, 160, 32)
+        xyz = np.stack([raw[..., o : o + 4].copy().view("<f4")[..., 0] for o in (0, 4, 8)], -1)
+        depth = xyz[..., 2]
+        np.testing.assert_allclose(xyz, depth_to_points(depth, camera), rtol=1e-6)
+    else:
+        assert msg.step == msg.width * (2 if sensor == "depth16" else 4)
+        if sensor == "depth16":
+            assert msg.encoding == "16UC1"
+            mm = np.frombuffer(msg.data, dtype="<u2").reshape(120, 160)
+            depth = np.where(mm == 0, np.nan, mm / 1000.0)
+        else:
+            assert msg.encoding == "32FC1"
+            depth = np.frombuffer(msg.data, dtype="<f4").reshape(120, 160)
+        _, cam_info = messages[CAMERA_INFO_TOPIC][4]
+        k = cam_info.K if fmt == "ros1" else cam_info.k
+        np.testing.assert_allclose(np.reshape(k, (3, 3)), camera.K)
+        assert cam_info.distortion_model == "plumb_bob"
+        assert header_ns(cam_info.header) == header_ns(msg.header)
+    # Returns are in range and land on true walls (or floor/ceiling/furniture).
+    valid = np.isfinite(depth)
+    assert valid.any()
+    assert depth[valid].min() >= camera.min_range - 0.01
+    assert depth[valid].max() <= camera.max_range + 0.1
+
+    truth = json.loads(info.truth_path.read_text())
+    assert Camera.from_json(truth["camera"]) == camera
+    assert (truth["seed"], truth["n_frames"], truth["stamps_ns"]) == (3, 8, frame_ns)
+    plan, trajectory, seen = load_truth(info.truth_path)
+    assert plan == info.plan
+    np.testing.assert_array_equal(trajectory.stamps, info.trajectory.stamps)
+    assert seen == info.seen_counts
+
+
+def interpolate_planar(samples, ns):
+    """tf2-style interpolation of planar transforms {ns: (x, y, yaw)} at time ns."""
+    times = sorted(samples)
+    if ns in samples:
+        return samples[ns]
+    after = next(t for t in times if t > ns)
+    before = max(t for t in times if t < ns)
+    a = (ns - before) / (after - before)
+    (x0, y0, w0), (x1, y1, w1) = samples[before], samples[after]
+    return (
+        x0 + a * (x1 - x0),
+        y0 + a * (y1 - y0),
+        w0 + a * math.remainder(w1 - w0, 2 * math.pi),
+    )
+
+
+def test_tf_chain_gives_the_true_pose_over_a_whole_drive(tmp_path):
+    camera = Camera(width=8, height=6)  # tiny: this test is about tf, not pixels
+    path = bag_path(tmp_path, "ros2-mcap")
+    info = write_scene_bag(
+        path, seed=12, n_frames=100_000, fmt="ros2-mcap", sensor="depth32", camera=camera
+    )
+    messages, _ = read_bag(path)
+
+    assert info.n_frames >= 600  # the route ended first: a natural 40+ s drive
+    assert len(messages[GROUND_TRUTH_TOPIC]) == info.n_frames
+    map_odom, odom_base = {}, {}
+    for _, msg in messages[TF_TOPIC]:
+        for tf in msg.transforms:
+            pose = (
+                tf.transform.translation.x,
+                tf.transform.translation.y,
+                quat_yaw(tf.transform.rotation),
+            )
+            key = (tf.header.frame_id, tf.child_frame_id)
+            {("map", "odom"): map_odom, ("odom", "base_link"): odom_base}[key][
+                header_ns(tf.header)
+            ] = pose
+    rate = len(map_odom) / (max(map_odom) - min(map_odom)) * 1e9
+    assert rate == pytest.approx(10.0, rel=0.02)
+
+    worst, drift = 0.0, 0.0
+    for i, stamp in enumerate(info.trajectory.stamps):
+        ns = stamp_to_ns(stamp)
+        assert ns in odom_base  # published at every sensor stamp
+        chain = se2(*interpolate_planar(map_odom, ns)) @ se2(*odom_base[ns])
+        x, y, yaw = info.trajectory.pose_at(i)
+        worst = max(worst, math.hypot(chain[0, 2] - x, chain[1, 2] - y))
+        assert math.remainder(math.atan2(chain[1, 0], chain[0, 0]) - yaw, 2 * math.pi) == (
+            pytest.approx(0.0, abs=1e-4)
+        )
+        drift = max(drift, math.hypot(odom_base[ns][0] - x, odom_base[ns][1] - y))
+    assert worst < 1e-3
+    assert drift > 0.3  # the odometry alone is clearly wrong
+
+    odom_msgs = messages[ODOM_TOPIC]
+    assert odom_msgs[0][1].pose.pose.position.x == pytest.approx(info.trajectory.x[0])
+    speeds = [math.hypot(m.twist.twist.linear.x, m.twist.twist.linear.y) for _, m in odom_msgs]
+    assert max(speeds) == pytest.approx(0.4, rel=0.1)
+
+    ((_, static),) = messages[TF_STATIC_TOPIC]
+    chain = np.eye(4)
+    for tf, (parent, child) in zip(
+        static.transforms,
+        [("base_link", "camera_link"), ("camera_link", "camera_optical_frame")],
+        strict=True,
+    ):
+        assert (tf.header.frame_id, tf.child_frame_id) == (parent, child)
+        step = np.eye(4)
+        step[:3, :3] = quat_matrix(tf.transform.rotation)
+        step[:3, 3] = [
+            tf.transform.translation.x,
+            tf.transform.translation.y,
+            tf.transform.translation.z,
+        ]
+        chain = chain @ step
+    np.testing.assert_allclose(chain, camera.T_base_camera, atol=1e-12)
+
+
+def test_point_cloud_lands_on_the_true_walls(tmp_path):
+    path = bag_path(tmp_path, "ros1")
+    info = write_scene_bag(path, seed=5, n_frames=30, fmt="ros1", sensor="pointcloud")
+    messages, _ = read_bag(path)
+    camera = Camera()
+    mount = camera.T_base_camera
+    walls = [w for w in info.plan.walls if not w.glass]
+    a = np.array([w.p0 for w in walls])
+    b = np.array([w.p1 for w in walls])
+
+    on_walls = 0
+    for i, (_, msg) in enumerate(messages[POINTS_TOPIC][::5]):
+        raw = np.frombuffer(msg.data, dtype=np.uint8).reshape(-1, 32)
+        xyz = np.stack([raw[:, o : o + 4].copy().view("<f4")[:, 0] for o in (0, 4, 8)], -1)
+        base = xyz.astype(float) @ mount[:3, :3].T + mount[:3, 3]
+        band = np.isfinite(base[:, 2]) & (base[:, 2] > 1.3) & (base[:, 2] < 2.1)
+        x, y, yaw = info.trajectory.pose_at(5 * i)
+        world = base[band, :2] @ se2(x, y, yaw)[:2, :2].T + [x, y]
+        d = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+        rel = world[:, None, :] - a[None]
+        along = np.einsum("kmi,mi->km", rel, d)
+        across = np.abs(np.einsum("kmi,mi->km", rel, d[:, ::-1] * [-1, 1]))
+        inside = (along >= -0.05) & (along <= np.linalg.norm(b - a, axis=1) + 0.05)
+        nearest = np.where(inside, across, np.inf).min(axis=1)
+        # Depth noise at 5 m is 3.6 cm; the band is above all furniture.
+        assert (nearest < 0.15).all()
+        on_walls += len(nearest)
+    assert on_walls > 1000
+
+    seen = info.seen_counts
+    assert set(seen) == {w.id for w in info.plan.walls}
+    assert sum(k >= 3 for k in seen.values()) >= 2
+    assert max(seen.values()) <= 30
+    assert all(seen[w.id] == 0 for w in info.plan.walls if w.glass)
+
+
+def test_short_custom_plan_needs_a_route(tmp_path):
+    with pytest.raises(ValueError, match="route"):
+        write_scene_bag(
+            tmp_path / "x.bag",
+            seed=0,
+            n_frames=3,
+            fmt="ros1",
+            sensor="depth16",
+            plan=wall_ahead(3.0),
+        )
