@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test bench sample clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "wallmap needs Python 3.11 or newer (set PYTHON=...)")'
@@ -19,6 +19,12 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest -q
+
+# The sample bag that ships in the package: a generated scene, 128x96 depth at 5 Hz, LZ4.
+sample: $(STAMP)
+	rm -f wallmap/data/sample.bag wallmap/data/sample.bag.truth.json
+	$(BIN)/wallmap scene wallmap/data/sample.bag --seed 11 --frames 1000 --sensor depth16 \
+		--width 128 --height 96 --rate 5 --compress
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py

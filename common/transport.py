@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,6 +75,16 @@ def settings_from_args(args: argparse.Namespace, *, wait_for_router: float) -> Z
     return ZenohSettings(tuple(connect), prefix, args.zenoh_config, wait_for_router)
 
 
+def zenoh_reason(err: Exception) -> str:
+    """Zenoh's error text as one line: the position and reason of a parse error, no source path."""
+    text = re.sub(r" at /\S+\.rs:\d+\.?", "", str(err)).strip()
+    position = re.search(r"-->\s*(\d+):(\d+)", text)
+    reason = re.search(r"^\s*= (.+)$", text, re.MULTILINE)
+    if position and reason:
+        return f"line {position[1]}, column {position[2]}: {reason[1].strip()}"
+    return " ".join(text.split())
+
+
 def make_config(
     settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
 ) -> zenoh.Config:
@@ -85,7 +96,7 @@ def make_config(
         try:
             conf = zenoh.Config.from_file(str(settings.config_file))
         except zenoh.ZError as err:
-            msg = f"zenoh config {settings.config_file} is invalid: {err}"
+            msg = f"zenoh config {settings.config_file} is invalid: {zenoh_reason(err)}"
             raise TransportError(msg) from err
         # Zenoh's default turns multicast on: keep it off unless the file speaks of it.
         if "multicast" not in settings.config_file.read_text(encoding="utf-8"):
@@ -115,7 +126,7 @@ def open_session(
     except zenoh.ZError as err:
         where = ", ".join(listen if mode == "router" else settings.connect)
         verb = "listen on" if mode == "router" else "reach a Zenoh router at"
-        msg = f"cannot {verb} {where} ({err})"
+        msg = f"cannot {verb} {where} ({zenoh_reason(err)})"
         raise TransportError(msg) from err
 
 

@@ -16,6 +16,7 @@ from typing import NoReturn
 from wallmap import __version__
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
+from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.transport import (
     DEFAULT_CONNECT,
     Keys,
@@ -140,8 +141,29 @@ def _cmd_up(args: argparse.Namespace) -> int:
         json_out=args.json_out,
         svg_out=args.svg_out,
         min_obs=args.min_obs,
+        truth=args.truth,
     )
     return up(settings, options)
+
+
+def _cmd_scene(args: argparse.Namespace) -> int:
+    if args.out.exists():
+        msg = f"{args.out} exists; choose a new path"
+        raise FileExistsError(msg)
+    info = write_scene_bag(
+        args.out,
+        seed=args.seed,
+        n_frames=args.frames,
+        fmt=args.format,
+        sensor=args.sensor,
+        camera=Camera(width=args.width, height=args.height),
+        rate_hz=args.rate,
+        compress=args.compress,
+    )
+    seen = sum(1 for n in info.seen_counts.values() if n >= 3)
+    print(f"wrote {info.path}: {info.n_frames} frames, {seen} walls seen in 3 frames or more")
+    print(f"ground truth: {info.truth_path}")
+    return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -237,8 +259,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--min-obs", type=int, default=3, metavar="N", help="walls printed: seen N times"
     )
+    p.add_argument(
+        "--truth", type=Path, metavar="FILE", help="score the map against a scene's truth"
+    )
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_up)
+
+    p = sub.add_parser("scene", help="write a bag of a generated scene, with its ground truth")
+    p.add_argument("out", type=Path, metavar="OUT", help="bag file (ROS 1) or folder (ROS 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the floor plan and the drive")
+    p.add_argument("--frames", type=int, default=600, help="most frames (the drive may end first)")
+    p.add_argument("--format", choices=("ros1", "ros2-mcap", "ros2-sqlite3"), default="ros1")
+    p.add_argument("--sensor", choices=("pointcloud", "depth16", "depth32"), default="pointcloud")
+    p.add_argument("--width", type=int, default=160, help="image width (px)")
+    p.add_argument("--height", type=int, default=120, help="image height (px)")
+    p.add_argument("--rate", type=_positive, default=15.0, help="frames per second")
+    p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
+    p.set_defaults(func=_cmd_scene)
 
     p = sub.add_parser("demo", help="run the pipeline on the sample bag shipped with wallmap")
     p.add_argument("--out", type=Path, default=Path("wallmap-demo.svg"), help="picture file")

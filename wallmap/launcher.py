@@ -21,7 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wallmap.common.evaluation import evaluate_map
 from wallmap.common.runtime import stop_on_signals
+from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import fetch_map, format_table, to_json
 from wallmap.picture import write_svg
@@ -43,6 +45,7 @@ class UpOptions:
     json_out: Path | None = None
     svg_out: Path | None = None
     min_obs: int = 3
+    truth: Path | None = None
 
 
 def free_loopback_port() -> int:
@@ -104,6 +107,9 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
             reply = fetch_map(session, Keys(settings.prefix), min_obs=options.min_obs)
             trajectory = fetch_map(session, Keys(settings.prefix), trajectory=True)["trajectory"]
         print(format_table(reply))
+        if options.truth:
+            plan, _, seen = load_truth(options.truth)
+            print(f"against the ground truth: {evaluate_map(reply['walls'], plan, seen).summary()}")
         if options.json_out:
             options.json_out.write_text(to_json(reply), encoding="utf-8")
         if options.svg_out:
@@ -124,5 +130,7 @@ def sample_bag() -> Path:
 def demo(out: Path) -> int:
     """``wallmap up`` on the sample bag, on a private loopback port, with a picture."""
     settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",))
-    options = UpOptions(bag=sample_bag(), fast=True, exit_when_done=True, svg_out=out)
+    bag = sample_bag()
+    truth = bag.with_name(bag.name + ".truth.json")
+    options = UpOptions(bag=bag, fast=True, exit_when_done=True, svg_out=out, truth=truth)
     return up(settings, options)

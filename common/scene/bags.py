@@ -105,7 +105,7 @@ def truth_path_for(path: str | Path) -> Path:
 class _BagSink:
     """One bag writer, ROS 1 or ROS 2, behind a format-independent interface."""
 
-    def __init__(self, path: Path, fmt: BagFormat) -> None:
+    def __init__(self, path: Path, fmt: BagFormat, *, compress: bool = False) -> None:
         self.ros1 = fmt == "ros1"
         if self.ros1:
             self.typestore = get_typestore(Stores.ROS1_NOETIC)
@@ -116,6 +116,8 @@ class _BagSink:
                 )
             )
             self.writer: Writer1 | Writer2 = Writer1(path)
+            if compress:
+                self.writer.set_compression(Writer1.CompressionFormat.LZ4)
         else:
             self.typestore = get_typestore(Stores.ROS2_HUMBLE)
             plugin = StoragePlugin.MCAP if fmt == "ros2-mcap" else StoragePlugin.SQLITE3
@@ -369,6 +371,7 @@ def write_scene_bag(
     camera: Camera | None = None,
     plan: FloorPlan | None = None,
     rate_hz: float = 15.0,
+    compress: bool = False,
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
@@ -391,6 +394,7 @@ def write_scene_bag(
         camera: Sensor and mount; the default is a 160 x 120 Kinect-like camera.
         plan: Scene to drive through (must have a route); generated if None.
         rate_hz: Sensor frame rate.
+        compress: LZ4 chunk compression (ROS 1 only), for bags that ship in a repository.
 
     Returns:
         What was written, including the per-wall seen counts.
@@ -417,7 +421,7 @@ def write_scene_bag(
     rng = np.random.default_rng(noise_seed)
     seen_counts = {w.id: 0 for w in plan.walls}
 
-    with _BagSink(path, fmt) as sink:
+    with _BagSink(path, fmt, compress=compress) as sink:
         tf_static = sink.topic(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True)
         tf = sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage")
         odom_conn = sink.topic(ODOM_TOPIC, "nav_msgs/msg/Odometry")

@@ -1,0 +1,131 @@
+"""Bad input: refused with a reason and counted, services stay up; the CLI fails in one line."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import msgpack
+import pytest
+from conftest import free_port
+from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_typestore
+
+from wallmap.common.codec import encode
+from wallmap.common.scene import write_scene_bag
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+
+pytestmark = pytest.mark.e2e
+
+
+def wallmap(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "wallmap", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def assert_one_line_error(out: subprocess.CompletedProcess[str], command: str, *words: str) -> None:
+    assert out.returncode != 0
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    assert lines[0].startswith(f"wallmap {command}: error: ")
+    assert "Traceback" not in out.stderr
+    for word in words:
+        assert word in lines[0]
+
+
+def put_when_matched(session, key: str, payloads: list[bytes]) -> None:
+    publisher = session.declare_publisher(key)
+    deadline = time.monotonic() + 10
+    while not publisher.matching_status.matching:
+        assert time.monotonic() < deadline, f"nobody subscribes to {key}"
+        time.sleep(0.05)
+    for payload in payloads:
+        publisher.put(payload)
+    publisher.undeclare()
+
+
+def test_malformed_messages_are_refused_counted_and_the_services_keep_working(stack, tmp_path):
+    detector = stack.start("detector", "detector", *stack.zenoh_args)
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    keys = Keys(stack.prefix)
+    nan_pose = encode({"stamp": 1.0, "x": math.nan, "y": 0.0, "yaw": 0.0})
+    wrong_version = msgpack.packb({"v": 7, "stamp": 1.0, "x": 0.0, "y": 0.0, "yaw": 0.0})
+    with open_session(ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)) as session:
+        put_when_matched(session, keys.frames, [b"\x00garbage", wrong_version])
+        put_when_matched(session, keys.pose, [nan_pose, wrong_version, b"{}"])
+        put_when_matched(session, keys.observations, [b"not msgpack at all \xc1"])
+        bad = list(session.get(f"{keys.map_walls}?min_obs=many", timeout=5))
+        assert bad[0].err is not None
+        assert "min_obs must be an integer" in bad[0].err.payload.to_string()
+
+    bag = tmp_path / "small.bag"
+    write_scene_bag(bag, seed=5, n_frames=30, fmt="ros1", sensor="depth16")
+    played = stack.run("player", str(bag), "--fast", *stack.zenoh_args)
+    assert played.returncode == 0, played.stderr
+    reply = stack.query()
+    assert reply["frames"] == 30
+    assert reply["refused"] == 4  # three poses and one observation message
+    assert "refused frame: not a msgpack payload" in detector.output()
+    assert "unsupported schema version 7" in detector.output()
+    assert detector.proc.poll() is None
+
+
+def test_missing_bag_is_one_line(tmp_path):
+    out = wallmap("player", str(tmp_path / "nope.bag"), "--connect", "tcp/127.0.0.1:1")
+    assert_one_line_error(out, "player", "nope.bag")
+
+
+def test_bag_without_a_usable_sensor_topic_is_one_line(tmp_path):
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "chatter.bag"
+    with Writer(bag) as writer:
+        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        msg = store.types["std_msgs/msg/String"](data="hello")
+        writer.write(conn, 1_000_000_000, store.serialize_ros1(msg, "std_msgs/msg/String"))
+    out = wallmap("player", str(bag), "--pose-source", "none", "--connect", "tcp/127.0.0.1:1")
+    assert_one_line_error(out, "player", "/chatter")
+
+
+def test_corrupt_bag_is_one_line(tmp_path):
+    bag = tmp_path / "cut.bag"
+    write_scene_bag(bag, seed=5, n_frames=5, fmt="ros1", sensor="depth16")
+    bag.write_bytes(bag.read_bytes()[:5000])
+    out = wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1")
+    assert_one_line_error(out, "player", "cut.bag")
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["player", "x.bag", "--rate", "-2"], ["--rate", "positive"]),
+        (["player", "x.bag", "--rate", "2", "--fast"], ["not allowed"]),
+        (["detector", "--band", "2,1"], ["LOW must be below HIGH"]),
+        (["query", "--prefix", "a/*"], ["invalid --prefix"]),
+    ],
+)
+def test_bad_flags_are_one_line(args, words):
+    out = wallmap(*args)
+    assert_one_line_error(out, args[0], *words)
+
+
+def test_no_router_is_one_line():
+    port = free_port()
+    out = wallmap("query", "--connect", f"tcp/127.0.0.1:{port}")
+    assert_one_line_error(out, "query", f"tcp/127.0.0.1:{port}")
+
+
+def test_bad_zenoh_config_is_one_line(tmp_path):
+    config = tmp_path / "z.json5"
+    config.write_text("{ mode: 'client', connect: { endpoints: [ } ")
+    out = wallmap("query", "--zenoh-config", str(config))
+    assert_one_line_error(out, "query", "z.json5")
+    out = wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")))
+    assert_one_line_error(out, "query", "does not exist")
