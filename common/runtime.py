@@ -8,11 +8,14 @@ import signal
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterator
 from types import FrameType
+from typing import TypeVar
 
 import zenoh
 
 log = logging.getLogger("wallmap")
+T = TypeVar("T")
 
 
 def setup_logging(service: str) -> logging.Logger:
@@ -68,3 +71,12 @@ def stop_on_signals() -> threading.Event:
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
     return stop
+
+
+def drain(channel: zenoh.handlers.Handler[T]) -> Iterator[T]:
+    """Everything a Zenoh channel receives, until its subscriber or queryable is undeclared."""
+    while True:
+        try:
+            yield channel.recv()
+        except zenoh.ZError:
+            return

@@ -33,6 +33,18 @@ def wait_for_port(port: int, timeout: float = 20.0) -> None:
     raise TimeoutError(f"nothing listens on port {port}")
 
 
+def run_wallmap(*args: str, timeout: float = 120.0, **kwargs) -> subprocess.CompletedProcess[str]:
+    """Run one wallmap command to its end, capturing its output as text."""
+    return subprocess.run(
+        [sys.executable, "-m", "wallmap", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        **kwargs,
+    )
+
+
 @dataclass
 class Service:
     """A running wallmap process and its log file."""
@@ -81,13 +93,7 @@ class Stack:
         return service
 
     def run(self, *args: str, timeout: float = 300.0) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "wallmap", *args],
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-            check=False,
-        )
+        return run_wallmap(*args, timeout=timeout)
 
     def query(self, *extra: str) -> dict:
         out = self.run("query", "--json", *extra, *self.zenoh_args, timeout=30)

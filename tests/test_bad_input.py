@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import math
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import msgpack
 import pytest
-from conftest import free_port
+from conftest import free_port, run_wallmap
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -19,16 +18,6 @@ from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 
 pytestmark = pytest.mark.e2e
-
-
-def wallmap(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "wallmap", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        check=False,
-    )
 
 
 def assert_one_line_error(out: subprocess.CompletedProcess[str], command: str, *words: str) -> None:
@@ -79,7 +68,7 @@ def test_malformed_messages_are_refused_counted_and_the_services_keep_working(st
 
 
 def test_missing_bag_is_one_line(tmp_path):
-    out = wallmap("player", str(tmp_path / "nope.bag"), "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap("player", str(tmp_path / "nope.bag"), "--connect", "tcp/127.0.0.1:1")
     assert_one_line_error(out, "player", "nope.bag")
 
 
@@ -90,7 +79,7 @@ def test_bag_without_a_usable_sensor_topic_is_one_line(tmp_path):
         conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
         msg = store.types["std_msgs/msg/String"](data="hello")
         writer.write(conn, 1_000_000_000, store.serialize_ros1(msg, "std_msgs/msg/String"))
-    out = wallmap("player", str(bag), "--pose-source", "none", "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap("player", str(bag), "--pose-source", "none", "--connect", "tcp/127.0.0.1:1")
     assert_one_line_error(out, "player", "/chatter")
 
 
@@ -98,7 +87,7 @@ def test_corrupt_bag_is_one_line(tmp_path):
     bag = tmp_path / "cut.bag"
     write_scene_bag(bag, seed=5, n_frames=5, fmt="ros1", sensor="depth16")
     bag.write_bytes(bag.read_bytes()[:5000])
-    out = wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1")
     assert_one_line_error(out, "player", "cut.bag")
 
 
@@ -112,20 +101,20 @@ def test_corrupt_bag_is_one_line(tmp_path):
     ],
 )
 def test_bad_flags_are_one_line(args, words):
-    out = wallmap(*args)
+    out = run_wallmap(*args)
     assert_one_line_error(out, args[0], *words)
 
 
 def test_no_router_is_one_line():
     port = free_port()
-    out = wallmap("query", "--connect", f"tcp/127.0.0.1:{port}")
+    out = run_wallmap("query", "--connect", f"tcp/127.0.0.1:{port}")
     assert_one_line_error(out, "query", f"tcp/127.0.0.1:{port}")
 
 
 def test_bad_zenoh_config_is_one_line(tmp_path):
     config = tmp_path / "z.json5"
     config.write_text("{ mode: 'client', connect: { endpoints: [ } ")
-    out = wallmap("query", "--zenoh-config", str(config))
+    out = run_wallmap("query", "--zenoh-config", str(config))
     assert_one_line_error(out, "query", "z.json5")
-    out = wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")))
+    out = run_wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")))
     assert_one_line_error(out, "query", "does not exist")

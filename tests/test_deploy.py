@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import free_port, wait_for_port
+from conftest import free_port, run_wallmap, wait_for_port
 
 pytestmark = pytest.mark.e2e
 
@@ -23,14 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_demo_maps_the_sample_bag_and_draws_it(tmp_path):
     svg = tmp_path / "demo.svg"
-    out = subprocess.run(
-        [sys.executable, "-m", "wallmap", "demo", "--out", str(svg)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        cwd=tmp_path,
-    )
+    out = run_wallmap("demo", "--out", str(svg), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "published 245 frames" in out.stdout
     assert re.search(r"\d+ walls from 245 frames", out.stdout)
@@ -50,13 +43,7 @@ def test_up_writes_the_map_as_json_and_keeps_state(tmp_path):
     bag = ROOT / "wallmap" / "data" / "sample.bag"
     args = ["up", str(bag), "--fast", "--exit-when-done", "--json-out", str(json_out)]
     args += ["--state", str(state), "--connect", f"tcp/127.0.0.1:{port}"]
-    out = subprocess.run(
-        [sys.executable, "-m", "wallmap", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    out = run_wallmap(*args)
     assert out.returncode == 0, out.stderr
     reply = yaml.safe_load(json_out.read_text())  # JSON is YAML
     assert reply["v"] == 1
@@ -130,13 +117,7 @@ def test_compose_services_run_as_processes(tmp_path):
         start("player")
         assert procs["player"].wait(timeout=120) == 0, logs["player"].read_text()
         assert "published 245 frames" in logs["player"].read_text()
-        query = subprocess.run(
-            [sys.executable, "-m", "wallmap", "query", "--min-obs", "3", "--connect", endpoint],
-            capture_output=True,
-            text=True,
-            timeout=30,
-            check=False,
-        )
+        query = run_wallmap("query", "--min-obs", "3", "--connect", endpoint, timeout=30)
         assert query.returncode == 0, query.stderr
         assert re.search(r"1\d walls from 245 frames", query.stdout), query.stdout
     finally:

@@ -13,7 +13,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError
 from wallmap.common.messages import pack, unpack_frame
-from wallmap.common.runtime import Stats, setup_logging
+from wallmap.common.runtime import Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
@@ -54,12 +54,8 @@ def _work(
     publisher: zenoh.Publisher,
     stats: Stats,
 ) -> None:
-    """Drain the frame channel until the subscriber is undeclared."""
-    while True:
-        try:
-            sample = channel.recv()
-        except zenoh.ZError:
-            return
+    """Detect walls in every frame until the subscriber is undeclared."""
+    for sample in drain(channel):
         stats.add("received")
         try:
             frame = unpack_frame(sample.payload.to_bytes())

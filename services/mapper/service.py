@@ -21,7 +21,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.messages import Observations, Progress, pack, unpack_observations, unpack_pose
-from wallmap.common.runtime import Stats, setup_logging
+from wallmap.common.runtime import Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
@@ -142,11 +142,7 @@ def _save(core: MapperCore, path: Path | None) -> None:
 
 
 def _poses(channel: zenoh.handlers.Handler[zenoh.Sample], core: MapperCore) -> None:
-    while True:
-        try:
-            sample = channel.recv()
-        except zenoh.ZError:
-            return
+    for sample in drain(channel):
         try:
             pose = unpack_pose(sample.payload.to_bytes())
         except MessageError as err:
@@ -221,11 +217,7 @@ def _process_head(
 
 
 def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> None:
-    while True:
-        try:
-            query = channel.recv()
-        except zenoh.ZError:
-            return
+    for query in drain(channel):
         with query:
             params = query.parameters
             try:

@@ -1,0 +1,102 @@
+"""Service behaviour over a real router: state across restarts, real-time playback, settings."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import pytest
+
+from wallmap.common.scene import write_scene_bag
+from wallmap.common.transport import (
+    TransportError,
+    ZenohSettings,
+    add_zenoh_arguments,
+    make_config,
+    settings_from_args,
+)
+
+
+@pytest.fixture(scope="module")
+def small_bag(tmp_path_factory):
+    bag = tmp_path_factory.mktemp("bags") / "small.bag"
+    write_scene_bag(bag, seed=8, n_frames=60, fmt="ros1", sensor="depth16")
+    return bag
+
+
+@pytest.mark.e2e
+def test_mapper_restart_on_its_state_file_keeps_walls_and_ids(stack, small_bag, tmp_path):
+    state = tmp_path / "map.json"
+    mapper = stack.start("mapper", "mapper", "--state", str(state), *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+    before = stack.query()
+    assert mapper.stop() == 0
+    assert state.exists()
+    stack.start("mapper-again", "mapper", "--state", str(state), *stack.zenoh_args)
+    time.sleep(1.0)
+    after = stack.query()
+    assert after["walls"] == before["walls"]
+    assert after["frames"] == 60
+    # New frames extend the same map; the ids stay.
+    assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+    again = stack.query()
+    assert again["frames"] == 120
+    assert {w["id"] for w in before["walls"]} <= {w["id"] for w in again["walls"]}
+
+
+@pytest.mark.e2e
+def test_real_time_playback_keeps_the_bag_timing_and_loses_nothing(stack, small_bag):
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    started = time.monotonic()
+    played = stack.run(
+        "player", str(small_bag), "--rate", "2", "--wait-for", "detector,mapper", *stack.zenoh_args
+    )
+    elapsed = time.monotonic() - started
+    assert played.returncode == 0, played.stderr
+    assert elapsed >= 59 / 15 / 2  # 60 frames at 15 Hz, played twice as fast
+    assert stack.query()["frames"] == 60
+
+
+def parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_zenoh_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def test_settings_come_from_flags_then_environment_then_defaults(monkeypatch):
+    monkeypatch.delenv("WALLMAP_CONNECT", raising=False)
+    monkeypatch.delenv("WALLMAP_PREFIX", raising=False)
+    default = settings_from_args(parse([]), wait_for_router=0.0)
+    assert default == ZenohSettings()
+    monkeypatch.setenv("WALLMAP_CONNECT", "tcp/10.0.0.1:7447, tcp/10.0.0.2:7447")
+    monkeypatch.setenv("WALLMAP_PREFIX", "robot1/run2/")
+    env = settings_from_args(parse([]), wait_for_router=0.0)
+    assert env.connect == ("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447")
+    assert env.prefix == "robot1/run2"
+    flags = settings_from_args(
+        parse(["--connect", "tcp/127.0.0.1:9", "--prefix", "r9"]), wait_for_router=0.0
+    )
+    assert (flags.connect, flags.prefix) == (("tcp/127.0.0.1:9",), "r9")
+    with pytest.raises(TransportError, match="invalid --prefix"):
+        settings_from_args(parse(["--prefix", "a/**"]), wait_for_router=0.0)
+
+
+def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):
+    plain = make_config(ZenohSettings(connect=("tcp/127.0.0.1:9",)))
+    assert plain.get_json("scouting/multicast/enabled") == "false"
+    assert plain.get_json("connect/endpoints") == '["tcp/127.0.0.1:9"]'
+    file = tmp_path / "z.json5"
+    file.write_text(
+        "{ connect: { endpoints: ['tcp/127.0.0.1:1'] }, adminspace: { enabled: true } }"
+    )
+    conf = make_config(ZenohSettings(connect=("tcp/127.0.0.1:9",), config_file=file))
+    assert conf.get_json("adminspace/enabled") == "true"
+    assert conf.get_json("connect/endpoints") == '["tcp/127.0.0.1:9"]'
+    assert conf.get_json("scouting/multicast/enabled") == "false"
+    file.write_text("{ scouting: { multicast: { enabled: true } } }")
+    asked = make_config(ZenohSettings(config_file=file))
+    assert asked.get_json("scouting/multicast/enabled") == "true"
+    waiting = make_config(ZenohSettings(wait_for_router=float("inf")))
+    assert waiting.get_json("connect/timeout_ms") == "-1"
