@@ -66,6 +66,22 @@ def update(s: Array, p: Array, innov: Innovation) -> tuple[Array, Array]:
     return s_new, 0.5 * (p_new + p_new.T)
 
 
+def fuse(
+    s_a: Array, p_a: Array, anchor_a: Array, s_b: Array, p_b: Array, anchor_b: Array
+) -> tuple[Array, Array]:
+    """Two estimates of one wall fused into one, in the parameterisation of wall ``a``.
+
+    Wall ``b`` is first re-expressed as its closest point to ``a``'s anchor (the measurement
+    model seen from that anchor with zero heading), then the two are combined in information form.
+    """
+    at_a = np.array([anchor_a[0], anchor_a[1], 0.0])
+    z = wall_model.predict(s_b, anchor_b, at_a)
+    j = wall_model.jacobian_state(s_b, anchor_b, at_a)
+    info_a, info_b = np.linalg.inv(p_a), np.linalg.inv(j @ p_b @ j.T)
+    p = np.linalg.inv(info_a + info_b)
+    return p @ (info_a @ s_a + info_b @ z), 0.5 * (p + p.T)
+
+
 def initial_state(z: Array, r: Array, pose: Array, pose_cov: Array) -> tuple[Array, Array, Array]:
     """A new wall from one observation: ``(s, P, anchor)``."""
     s, anchor, ds_dz, ds_dpose = wall_model.from_observation(z, pose)

@@ -87,9 +87,12 @@ def _require_map(m: object) -> dict[str, Any]:
     return m
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # array fields make generated equality ambiguous
 class Pose:
-    """A robot pose in the map frame: the contract's ``{prefix}/pose``."""
+    """A robot pose in the map frame: the contract's ``{prefix}/pose``.
+
+    ``cov`` is the 3x3 covariance of (x, y, yaw), or None when the source gives none.
+    """
 
     stamp: float
     x: float

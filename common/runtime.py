@@ -45,15 +45,19 @@ class Stats:
 
     def refuse(self, what: str, reason: str) -> None:
         """Count and log a refused message; the service carries on."""
+        self.add("refused")
+        self.note(f"refused.{what}", reason, f"refused {what}: {reason}")
+
+    def note(self, name: str, kind: str, message: str) -> None:
+        """Count an event and log it, at most once a second for each ``kind``."""
         with self._lock:
-            self._counts["refused"] += 1
-            self._counts[f"refused.{what}"] += 1
+            self._counts[name] += 1
             now = time.monotonic()
-            quiet = now - self._last_logged.get(reason, -1e9) < 1.0
+            quiet = now - self._last_logged.get(kind, -1e9) < 1.0
             if not quiet:
-                self._last_logged[reason] = now
+                self._last_logged[kind] = now
         if not quiet:
-            self._log.warning("refused %s: %s", what, reason)
+            self._log.warning("%s", message)
 
     def snapshot(self) -> dict[str, int]:
         """A copy of all counters."""

@@ -85,6 +85,16 @@ def zenoh_reason(err: Exception) -> str:
     return " ".join(text.split())
 
 
+def key_expression(value: str, flag: str) -> str:
+    """A key expression checked by Zenoh, so a typo fails in one line at start."""
+    try:
+        zenoh.KeyExpr(value)
+    except zenoh.ZError as err:
+        msg = f"invalid {flag} {value!r}: {zenoh_reason(err)}"
+        raise TransportError(msg) from err
+    return value
+
+
 def make_config(
     settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
 ) -> zenoh.Config:

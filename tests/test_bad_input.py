@@ -98,6 +98,8 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["player", "x.bag", "--rate", "2", "--fast"], ["not allowed"]),
         (["detector", "--band", "2,1"], ["LOW must be below HIGH"]),
         (["query", "--prefix", "a/*"], ["invalid --prefix"]),
+        (["mapper", "--pose-key", "rt/tf*"], ["invalid --pose-key", "may only be preceded"]),
+        (["mapper", "--pose-format", "ros2:std_msgs/msg/String"], ["--pose-format"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):

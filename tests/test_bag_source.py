@@ -15,9 +15,10 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from wallmap.common.messages import Pose
+from wallmap.common.tf_buffer import transform_matrix
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.frames import Pose2D
 from wallmap.services.player.pose_sources import (
     PoseSourceSpec,
     PoseTrack,
@@ -25,7 +26,6 @@ from wallmap.services.player.pose_sources import (
     parse_pose_source,
     resolve_pose_topic,
 )
-from wallmap.services.player.tf_buffer import transform_matrix
 
 # shared/ sits beside the repository checkout, locally and in CI.
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
@@ -726,9 +726,9 @@ def test_resolve_pose_topic() -> None:
 def test_pose_track_interpolation_and_coverage() -> None:
     cov = np.eye(3)
     poses = [
-        Pose2D(2.0, 2.0, 0.0, -3.0, 3 * cov, "odom", "base"),
-        Pose2D(0.0, 0.0, 0.0, 3.0, cov, "odom", "base"),
-        Pose2D(1.0, 1.0, 0.0, 3.1, None, "odom", "base"),
+        Pose(2.0, 2.0, 0.0, -3.0, 3 * cov, "odom", "base"),
+        Pose(0.0, 0.0, 0.0, 3.0, cov, "odom", "base"),
+        Pose(1.0, 1.0, 0.0, 3.1, None, "odom", "base"),
     ]
     track = PoseTrack.from_poses(poses)
     assert len(track) == 3

@@ -8,16 +8,19 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from wallmap.common.scene import (
+    AMCL_POSE_TOPIC,
     CAMERA_INFO_TOPIC,
     GROUND_TRUTH_TOPIC,
     IMAGE_TOPIC,
     ODOM_TOPIC,
     POINTS_TOPIC,
+    SCAN_TOPIC,
     TF_STATIC_TOPIC,
     TF_TOPIC,
     Camera,
     FloorPlan,
     Furniture,
+    Scanner,
     Wall,
     clearance,
     depth_to_points,
@@ -25,10 +28,14 @@ from wallmap.common.scene import (
     generate_floorplan,
     generate_trajectory,
     load_truth,
+    read_tum,
     render_depth,
+    render_scan,
+    scan_walls_seen,
     stamp_to_ns,
     walls_seen,
     write_scene_bag,
+    write_tum,
 )
 from wallmap.common.scene.floorplan import segment_distances
 
@@ -323,6 +330,108 @@ def test_render_is_fast():
     assert np.median(times) < 0.05
 
 
+# --- laser scans ---------------------------------------------------------------------------
+
+SCANNER = Scanner()
+CENTRE_BEAM = 270
+
+
+def wall_ahead_of_scanner(distance, *, glass=False, furniture=()):
+    """One wide wall perpendicular to the centre beam of a robot at the origin facing +x."""
+    x = SCANNER.mount_xyz[0] + distance
+    return FloorPlan(walls=(Wall(7, (x, -20.0), (x, 20.0), glass=glass),), furniture=furniture)
+
+
+def test_scanner_defaults():
+    assert SCANNER.n_beams == 541
+    assert math.degrees(SCANNER.angle_increment) == pytest.approx(0.5)
+    assert SCANNER.angles[[0, CENTRE_BEAM, -1]] == pytest.approx(
+        [-3 * math.pi / 4, 0, 3 * math.pi / 4]
+    )
+    np.testing.assert_allclose(SCANNER.T_base_laser[:3, :3], np.eye(3))
+    np.testing.assert_allclose(SCANNER.T_base_laser[:3, 3], [0.15, 0.0, 1.2])
+    assert Scanner.from_json(json.loads(json.dumps(SCANNER.to_json()))) == SCANNER
+    narrow = Scanner(angle_min=-0.5, angle_max=0.5, n_beams=11, mount_xyz=(0.0, 0.1, 1.5))
+    assert Scanner.from_json(json.loads(json.dumps(narrow.to_json()))) == narrow
+
+
+def test_scan_of_a_wall_straight_ahead():
+    ranges, hit = render_scan(wall_ahead_of_scanner(3.0), 0.0, 0.0, 0.0, SCANNER)
+
+    assert ranges.dtype == np.float32
+    assert hit.dtype == np.int32
+    assert ranges.shape == hit.shape == (541,)
+    assert ranges[CENTRE_BEAM] == 3.0
+    assert hit[CENTRE_BEAM] == 7
+    # A flat wall: range = 3 / cos(angle) out to where that passes range_max.
+    seen = hit == 7
+    np.testing.assert_allclose(ranges[seen], 3.0 / np.cos(SCANNER.angles[seen]), rtol=1e-6)
+    assert seen.sum() == 2 * math.floor(math.degrees(math.acos(3.0 / 8.0)) / 0.5) + 1
+    assert np.isnan(ranges[~seen]).all()  # past range_max or behind: nothing
+    assert (hit[~seen] == -1).all()
+    assert scan_walls_seen(hit, ranges) == {7}
+
+
+def test_scan_after_moving_and_turning():
+    plan = FloorPlan(walls=(Wall(1, (-20.0, 5.0), (20.0, 5.0)),))  # north of the robot
+    ranges, hit = render_scan(plan, 1.0, 0.5, math.pi / 2, SCANNER)
+
+    assert ranges[CENTRE_BEAM] == pytest.approx(5.0 - 0.5 - 0.15, abs=1e-6)
+    assert hit[CENTRE_BEAM] == 1
+
+
+def test_scan_through_glass_gives_no_return():
+    ranges, hit = render_scan(wall_ahead_of_scanner(3.0, glass=True), 0.0, 0.0, 0.0, SCANNER)
+
+    assert np.isnan(ranges).all()
+    assert hit[CENTRE_BEAM] == 7
+    assert scan_walls_seen(hit, ranges) == set()
+
+
+def test_scan_sees_only_furniture_taller_than_the_mount():
+    def box(height):
+        return Furniture(center=(2.0, 0.0), size=(0.6, 1.0), yaw=0.0, height=height)
+
+    low, low_hit = render_scan(wall_ahead_of_scanner(3.0, furniture=(box(1.1),)), 0, 0, 0, SCANNER)
+    assert low[CENTRE_BEAM] == 3.0
+    assert low_hit[CENTRE_BEAM] == 7
+
+    tall, tall_hit = render_scan(
+        wall_ahead_of_scanner(3.0, furniture=(box(1.5),)), 0, 0, 0, SCANNER
+    )
+    # The box's front face is at x = 1.7, i.e. 1.55 m in front of the laser.
+    assert tall[CENTRE_BEAM] == pytest.approx(1.55, abs=1e-6)
+    assert tall_hit[CENTRE_BEAM] == -1
+    assert (tall_hit == -1).sum() > (low_hit == -1).sum()
+
+
+def test_scan_range_limits_and_walls_below_the_beam():
+    far, far_hit = render_scan(wall_ahead_of_scanner(8.5), 0.0, 0.0, 0.0, SCANNER)
+    assert np.isnan(far).all()
+    assert (far_hit == -1).all()
+    short_wall = FloorPlan(walls=(Wall(7, (3.15, -20.0), (3.15, 20.0), height=1.0),))
+    under, under_hit = render_scan(short_wall, 0.0, 0.0, 0.0, SCANNER)
+    assert np.isnan(under).all()
+    assert (under_hit == -1).all()
+
+
+def test_scan_noise_and_seen_threshold():
+    ranges, hit = render_scan(
+        wall_ahead_of_scanner(2.0), 0.0, 0.0, 0.0, SCANNER, np.random.default_rng(4)
+    )
+    seen = hit == 7
+    error = ranges[seen] - 2.0 / np.cos(SCANNER.angles[seen])
+    assert np.std(error) == pytest.approx(SCANNER.noise_sigma, rel=0.15)
+    assert abs(np.mean(error)) < 0.003
+
+    # A 20 cm wall at 3 m spans 7 beams (3.8 degrees): not enough for a line.
+    stub = FloorPlan(walls=(Wall(2, (3.15, -0.1), (3.15, 0.1)),))
+    ranges, hit = render_scan(stub, 0.0, 0.0, 0.0, SCANNER)
+    assert (hit == 2).sum() == 7
+    assert scan_walls_seen(hit, ranges) == set()
+    assert scan_walls_seen(hit, ranges, min_beams=7) == {2}
+
+
 # --- bags ----------------------------------------------------------------------------------
 
 
@@ -340,6 +449,7 @@ def test_bag_round_trip(tmp_path, fmt, sensor):
         TF_TOPIC: "tf2_msgs/msg/TFMessage",
         ODOM_TOPIC: "nav_msgs/msg/Odometry",
         GROUND_TRUTH_TOPIC: "geometry_msgs/msg/PoseStamped",
+        AMCL_POSE_TOPIC: "geometry_msgs/msg/PoseWithCovarianceStamped",
     }
     if sensor == "pointcloud":
         expected_types[POINTS_TOPIC] = "sensor_msgs/msg/PointCloud2"
@@ -348,7 +458,7 @@ def test_bag_round_trip(tmp_path, fmt, sensor):
         expected_types[CAMERA_INFO_TOPIC] = "sensor_msgs/msg/CameraInfo"
     assert types == expected_types
     sensor_topic = POINTS_TOPIC if sensor == "pointcloud" else IMAGE_TOPIC
-    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, sensor_topic):
+    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, AMCL_POSE_TOPIC, sensor_topic):
         assert len(messages[topic]) == 8
     # Odom → base_link at the 8 stamps and the 7 midpoints, map → odom at 10 Hz (5) plus
     # one at the last stamp so that it can be interpolated up to the end.
@@ -356,7 +466,7 @@ def test_bag_round_trip(tmp_path, fmt, sensor):
     assert len(messages[TF_STATIC_TOPIC]) == 1
 
     frame_ns = [stamp_to_ns(s) for s in info.trajectory.stamps]
-    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, sensor_topic):
+    for topic in (ODOM_TOPIC, GROUND_TRUTH_TOPIC, AMCL_POSE_TOPIC, sensor_topic):
         assert [ns for ns, _ in messages[topic]] == frame_ns
         assert [header_ns(m.header) for _, m in messages[topic]] == frame_ns
     for ns, msg in messages[GROUND_TRUTH_TOPIC]:
@@ -365,6 +475,7 @@ def test_bag_round_trip(tmp_path, fmt, sensor):
         assert (msg.pose.position.x, msg.pose.position.y) == pytest.approx(
             info.trajectory.pose_at(i)[:2]
         )
+    assert_amcl_is_the_truth(messages)
     if fmt == "ros1":
         assert [m.header.seq for _, m in messages[ODOM_TOPIC]] == list(range(8))
 
@@ -411,6 +522,21 @@ def test_bag_round_trip(tmp_path, fmt, sensor):
     assert plan == info.plan
     np.testing.assert_array_equal(trajectory.stamps, info.trajectory.stamps)
     assert seen == info.seen_counts
+
+
+def assert_amcl_is_the_truth(messages):
+    """/amcl_pose repeats /ground_truth with a 2 cm, 1 degree covariance."""
+    expected = np.zeros(36)
+    expected[[0, 7]] = 0.02**2
+    expected[35] = math.radians(1.0) ** 2
+    amcl, truth = messages[AMCL_POSE_TOPIC], messages[GROUND_TRUTH_TOPIC]
+    assert len(amcl) == len(truth)
+    for (ns, msg), (truth_ns, truth_msg) in zip(amcl, truth, strict=True):
+        assert ns == truth_ns
+        assert header_ns(msg.header) == header_ns(truth_msg.header)
+        assert msg.header.frame_id == "map"
+        assert msg.pose.pose == truth_msg.pose
+        np.testing.assert_array_equal(msg.pose.covariance, expected)
 
 
 def interpolate_planar(samples, ns):
@@ -538,3 +664,116 @@ def test_short_custom_plan_needs_a_route(tmp_path):
             sensor="depth16",
             plan=wall_ahead(3.0),
         )
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2-mcap"])
+def test_laserscan_bag_round_trip(tmp_path, fmt):
+    path = bag_path(tmp_path, fmt)
+    scanner = Scanner(mount_xyz=(0.2, -0.05, 1.3))
+    info = write_scene_bag(path, seed=4, n_frames=40, fmt=fmt, sensor="laserscan", scanner=scanner)
+    messages, types = read_bag(path)
+
+    assert types == {
+        TF_STATIC_TOPIC: "tf2_msgs/msg/TFMessage",
+        TF_TOPIC: "tf2_msgs/msg/TFMessage",
+        ODOM_TOPIC: "nav_msgs/msg/Odometry",
+        GROUND_TRUTH_TOPIC: "geometry_msgs/msg/PoseStamped",
+        AMCL_POSE_TOPIC: "geometry_msgs/msg/PoseWithCovarianceStamped",
+        SCAN_TOPIC: "sensor_msgs/msg/LaserScan",
+    }
+    frame_ns = [stamp_to_ns(s) for s in info.trajectory.stamps]
+    assert [ns for ns, _ in messages[SCAN_TOPIC]] == frame_ns
+    assert [header_ns(m.header) for _, m in messages[SCAN_TOPIC]] == frame_ns
+    assert len(messages[TF_TOPIC]) == 79 + 27
+    assert_amcl_is_the_truth(messages)
+
+    ((_, static),) = messages[TF_STATIC_TOPIC]
+    ((tf,),) = [static.transforms]
+    assert (tf.header.frame_id, tf.child_frame_id) == ("base_link", "laser")
+    translation = tf.transform.translation
+    assert (translation.x, translation.y, translation.z) == (0.2, -0.05, 1.3)
+    rotation = tf.transform.rotation
+    assert (rotation.x, rotation.y, rotation.z, rotation.w) == (0.0, 0.0, 0.0, 1.0)
+
+    walls = [w for w in info.plan.walls if not w.glass]
+    a = np.array([w.p0 for w in walls])
+    b = np.array([w.p1 for w in walls])
+    returns = 0
+    for i, (_, msg) in enumerate(messages[SCAN_TOPIC]):
+        assert msg.header.frame_id == "laser"
+        assert msg.angle_min == pytest.approx(-3 * math.pi / 4)
+        assert msg.angle_max == pytest.approx(3 * math.pi / 4)
+        assert msg.angle_increment == pytest.approx(math.radians(0.5))
+        assert (msg.range_min, msg.range_max) == pytest.approx((0.1, 8.0))
+        assert msg.scan_time == pytest.approx(1 / 15)
+        assert msg.ranges.dtype == np.float32
+        assert len(msg.ranges) == 541
+        assert len(msg.intensities) == 0
+        finite = np.isfinite(msg.ranges)
+        assert np.isnan(msg.ranges).sum() == 0  # no return is +inf, REP 117
+        assert (msg.ranges[finite] >= 0.1).all()
+        assert (msg.ranges[finite] <= 8.0).all()
+        # Every return lies on a real wall: the plan's furniture is below the beam.
+        angles = msg.angle_min + msg.angle_increment * np.arange(541)
+        local = np.column_stack([np.cos(angles), np.sin(angles)])[finite] * msg.ranges[
+            finite, None
+        ].astype(float) + [0.2, -0.05]
+        x, y, yaw = info.trajectory.pose_at(i)
+        world = local @ se2(x, y, yaw)[:2, :2].T + [x, y]
+        distance = segment_distances(world, world, a, b).min(axis=1)
+        assert distance.max() < 0.06  # 0.01 m noise, 6 sigma
+        returns += finite.sum()
+    assert returns > 40 * 100
+
+    truth = json.loads(info.truth_path.read_text())
+    assert "camera" not in truth
+    assert Scanner.from_json(truth["scanner"]) == scanner
+    assert truth["sensor"] == "laserscan"
+    _, _, seen = load_truth(info.truth_path)
+    assert seen == info.seen_counts
+    assert sum(k >= 3 for k in seen.values()) >= 3
+    assert max(seen.values()) <= 40
+    assert all(seen[w.id] == 0 for w in info.plan.walls if w.glass)
+
+
+def test_laserscan_bag_in_sqlite3_with_the_default_scanner(tmp_path):
+    path = bag_path(tmp_path, "ros2-sqlite3")
+    info = write_scene_bag(path, seed=4, n_frames=3, fmt="ros2-sqlite3", sensor="laserscan")
+    messages, _ = read_bag(path)
+
+    assert len(messages[SCAN_TOPIC]) == 3
+    ((_, static),) = messages[TF_STATIC_TOPIC]
+    assert static.transforms[0].transform.translation.z == 1.2
+    truth = json.loads(info.truth_path.read_text())
+    assert Scanner.from_json(truth["scanner"]) == Scanner()
+
+
+def test_bags_are_reproducible(tmp_path):
+    paths = [tmp_path / f"{name}.bag" for name in "ab"]
+    for path in paths:
+        write_scene_bag(path, seed=6, n_frames=5, fmt="ros1", sensor="depth16", compress=True)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+
+
+def test_tum_round_trip(tmp_path):
+    traj = generate_trajectory(generate_floorplan(2), 2).sliced(slice(0, 200))
+    path = tmp_path / "truth.tum"
+    write_tum(traj, path)
+    lines = path.read_text().splitlines()
+
+    assert lines[0].startswith("#")
+    assert len(lines) == 201
+    fields = lines[1].split()
+    assert len(fields) == 8
+    assert fields[0] == f"{traj.stamps[0]:.9f}"
+    assert float(fields[3]) == 0.0
+    assert (float(fields[6]), float(fields[7])) == pytest.approx(
+        (math.sin(traj.yaw[0] / 2), math.cos(traj.yaw[0] / 2)), abs=1e-9
+    )
+    back = read_tum(path)
+    assert len(back) == len(traj)
+    np.testing.assert_allclose(back.stamps, traj.stamps, rtol=0, atol=1e-9)
+    assert [stamp_to_ns(s) for s in back.stamps] == [stamp_to_ns(s) for s in traj.stamps]
+    np.testing.assert_allclose(back.x, traj.x, atol=1e-9)
+    np.testing.assert_allclose(back.y, traj.y, atol=1e-9)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (back.yaw - traj.yaw))), 0.0, atol=1e-8)

@@ -6,8 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from wallmap.services.player.errors import PlayerError, TfError
-from wallmap.services.player.tf_buffer import TfBuffer, transform_matrix
+from wallmap.common.tf_buffer import TfBuffer, TfError, transform_matrix
 
 
 def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
@@ -97,7 +96,7 @@ def test_extrapolation_errors_name_edge_stamp_and_range() -> None:
     assert "[10.000000, 12.000000]" in text
     with pytest.raises(TfError, match=r"into the past: edge map -> odom .*\[10\.0+, 12\.0+\]"):
         tf.lookup("camera_link", "map", 9.0)
-    assert isinstance(err.value, PlayerError)
+    assert isinstance(err.value, LookupError)
 
 
 def test_tolerance_uses_the_end_sample() -> None:

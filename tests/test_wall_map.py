@@ -165,3 +165,49 @@ def test_pose_buffer_interpolates_waits_and_refuses():
     assert buf.lookup(1.1).x == 5.0
     buf.add(Pose(-500.0, 0.0, 0.0, 0.0))  # time jumped back: a new run
     assert len(buf) == 1
+
+
+def test_walls_that_converge_onto_one_line_merge_and_the_older_id_survives(tmp_path):
+    wall_map = WallMap()
+    cov = np.eye(2) * 1e-4
+
+    def seen(x0, x1, stamp):
+        obs = WallObservation(
+            np.array([0.0, 2.0]), cov, np.array([x0, 2.0]), np.array([x1, 2.0]), 40, 0.01
+        )
+        return wall_map.integrate(
+            Observations("r", 0, stamp, "base_link", [obs]), Pose(stamp, 0, 0, 0)
+        )
+
+    assert seen(-6.0, -4.0, 1.0) == [0]
+    assert seen(-1.5, 2.0, 2.0) == [1]  # 2.5 m away along the line: another wall, for now
+    assert len(wall_map.walls) == 2
+    assert seen(-4.5, -1.0, 3.0) == [0]  # the gap is seen: one wall
+    assert list(wall_map.walls) == [0]
+    assert wall_map.merges == [(1, 0, 3.0)]
+    wall = wall_map.reply()["walls"][0]
+    assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 2.0])
+    assert wall["n_obs"] == 3
+    assert wall_map.reply()["merges"] == [[1, 0, 3.0]]
+    path = tmp_path / "map.json"
+    state_file.write(path, state_file.to_json(wall_map))
+    assert state_file.load(path, MapperConfig()).merges == [(1, 0, 3.0)]
+
+
+def test_two_faces_of_a_real_wall_stay_apart():
+    wall_map = WallMap()
+    cov = np.eye(2) * 1e-4
+    near = WallObservation(
+        np.array([0.0, 2.0]), cov, np.array([-2.0, 2.0]), np.array([2.0, 2.0]), 40, 0.01
+    )
+    exact = np.eye(3) * 1e-8  # a precise pose source: the gate alone keeps the faces apart
+    wall_map.integrate(Observations("r", 0, 1.0, "base_link", [near]), Pose(1.0, 0, 0, 0, exact))
+    far_face = WallObservation(
+        np.array([0.0, -1.9]), cov, np.array([2.0, -1.9]), np.array([-2.0, -1.9]), 40, 0.01
+    )
+    # From the other room, 4 m further: the wall's other face, 10 cm thick.
+    wall_map.integrate(
+        Observations("r", 1, 2.0, "base_link", [far_face]), Pose(2.0, 0, 4.0, 0, exact)
+    )
+    assert len(wall_map.walls) == 2
+    assert wall_map.merges == []

@@ -17,11 +17,13 @@ from wallmap import __version__
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
     DEFAULT_CONNECT,
     Keys,
     TransportError,
     add_zenoh_arguments,
+    key_expression,
     open_session,
     settings_from_args,
 )
@@ -31,11 +33,13 @@ from wallmap.services.detector import service as detector_service
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.detector.scan_row import RowSelection
 from wallmap.services.mapper import service as mapper_service
+from wallmap.services.mapper.pose_input import FORMATS as POSE_FORMATS
+from wallmap.services.mapper.pose_input import make_pose_input
 from wallmap.services.mapper.state_file import StateError
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
 
-FAILURES = (TransportError, PlayerError, StateError, QueryError, OSError)
+FAILURES = (TransportError, PlayerError, TfError, StateError, QueryError, OSError, ValueError)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -89,8 +93,13 @@ def _cmd_detector(args: argparse.Namespace) -> int:
 
 
 def _cmd_mapper(args: argparse.Namespace) -> int:
+    make_pose_input(args.pose_format, args.pose_frames)  # a bad format fails here, in one line
     mapper = mapper_service.MapperSettings(
-        state=args.state, pose_key=args.pose_key, pose_wait=args.pose_wait
+        state=args.state,
+        pose_key=args.pose_key and key_expression(args.pose_key, "--pose-key"),
+        pose_format=args.pose_format,
+        pose_frames=args.pose_frames,
+        pose_wait=args.pose_wait,
     )
     mapper_service.run(
         settings_from_args(args, wait_for_router=math.inf), mapper, stop_on_signals()
@@ -236,6 +245,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--pose-key", metavar="KEYEXPR", help="where poses come from (default PREFIX/pose)"
+    )
+    p.add_argument(
+        "--pose-format",
+        default="wallmap",
+        choices=POSE_FORMATS,
+        metavar="FORMAT",
+        help="wallmap (default) or ros2:TYPE for CDR from a ROS 2 system: "
+        + ", ".join(POSE_FORMATS[1:]),
+    )
+    p.add_argument(
+        "--pose-frames",
+        default="map>base_link",
+        metavar="PARENT>CHILD",
+        help="the pose wanted from ros2:tf2_msgs/msg/TFMessage (default map>base_link)",
     )
     p.add_argument("--pose-wait", type=_positive, default=5.0, help="max wait for a pose (s)")
     add_zenoh_arguments(p)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from wallmap.common.messages import Frame, Pose
+from wallmap.common.messages import Frame
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.wall_map import MapperConfig, WallMap
 from wallmap.services.player.bag_source import BagSource
@@ -32,7 +32,7 @@ def map_bag(
                 "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor
             )
             observations = wall_detector.detect(message)
-            wall_map.integrate(observations, Pose(pose.stamp, pose.x, pose.y, pose.yaw, pose.cov))
+            wall_map.integrate(observations, pose)
     return wall_map
 
 

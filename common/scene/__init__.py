@@ -1,16 +1,20 @@
 """Synthetic scenes: floor plans, trajectories, depth rendering and ROS bags with truth."""
 
 from .bags import (
+    AMCL_COVARIANCE,
+    AMCL_POSE_TOPIC,
     BASE_FRAME,
     CAMERA_INFO_TOPIC,
     CAMERA_LINK_FRAME,
     GROUND_TRUTH_TOPIC,
     IMAGE_TOPIC,
+    LASER_FRAME,
     MAP_FRAME,
     ODOM_FRAME,
     ODOM_TOPIC,
     OPTICAL_FRAME,
     POINTS_TOPIC,
+    SCAN_TOPIC,
     TF_STATIC_TOPIC,
     TF_TOPIC,
     BagFormat,
@@ -29,26 +33,45 @@ from .floorplan import (
     generate_floorplan,
     smooth_route,
 )
-from .render import Camera, depth_to_points, render_depth, walls_seen
-from .trajectory import Trajectory, drifting_odometry, generate_trajectory
+from .render import (
+    Camera,
+    Scanner,
+    depth_to_points,
+    render_depth,
+    render_scan,
+    scan_walls_seen,
+    walls_seen,
+)
+from .trajectory import (
+    Trajectory,
+    drifting_odometry,
+    generate_trajectory,
+    read_tum,
+    write_tum,
+)
 
 __all__ = [
+    "AMCL_COVARIANCE",
+    "AMCL_POSE_TOPIC",
     "BASE_FRAME",
     "CAMERA_INFO_TOPIC",
     "CAMERA_LINK_FRAME",
     "GROUND_TRUTH_TOPIC",
     "IMAGE_TOPIC",
+    "LASER_FRAME",
     "MAP_FRAME",
     "ODOM_FRAME",
     "ODOM_TOPIC",
     "OPTICAL_FRAME",
     "POINTS_TOPIC",
+    "SCAN_TOPIC",
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
     "BagFormat",
     "Camera",
     "FloorPlan",
     "Furniture",
+    "Scanner",
     "SceneInfo",
     "SensorKind",
     "Trajectory",
@@ -59,10 +82,14 @@ __all__ = [
     "generate_floorplan",
     "generate_trajectory",
     "load_truth",
+    "read_tum",
     "render_depth",
+    "render_scan",
+    "scan_walls_seen",
     "smooth_route",
     "stamp_to_ns",
     "truth_path_for",
     "walls_seen",
     "write_scene_bag",
+    "write_tum",
 ]

@@ -1,11 +1,12 @@
 """Synthetic scenes written as real ROS 1 / ROS 2 bags, with ground truth beside them.
 
-A bag holds what a robot with a Kinect-like sensor and a perfect localiser would record:
-static tf for the camera mount, odometry that drifts (``odom → base_link`` on /tf and
-/odom), a ``map → odom`` correction that makes the chain equal the true pose, the true
-pose on /ground_truth, and the depth data as a point cloud or a depth image. The ground
-truth file ``<bag>.truth.json`` holds the plan, the true trajectory and how often the
-detector could have seen each wall.
+A bag holds what a robot with a Kinect-like depth camera or a 2-D laser scanner and a
+perfect localiser would record: static tf for the sensor mount, odometry that drifts
+(``odom → base_link`` on /tf and /odom), a ``map → odom`` correction that makes the chain
+equal the true pose, the true pose on /ground_truth and, as an AMCL-like localiser would
+publish it, on /amcl_pose, and the sensor data as a point cloud, a depth image or a laser
+scan. The ground truth file ``<bag>.truth.json`` holds the plan, the true trajectory and
+how often the detector could have seen each wall.
 """
 
 from __future__ import annotations
@@ -32,25 +33,36 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .floorplan import FloorPlan, generate_floorplan
-from .render import Camera, depth_to_points, render_depth, walls_seen
+from .render import (
+    Camera,
+    Scanner,
+    depth_to_points,
+    render_depth,
+    render_scan,
+    scan_walls_seen,
+    walls_seen,
+)
 from .trajectory import Trajectory, drifting_odometry, generate_trajectory
 
 BagFormat = Literal["ros1", "ros2-mcap", "ros2-sqlite3"]
-SensorKind = Literal["pointcloud", "depth16", "depth32"]
+SensorKind = Literal["pointcloud", "depth16", "depth32", "laserscan"]
 
 MAP_FRAME = "map"
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
 CAMERA_LINK_FRAME = "camera_link"
 OPTICAL_FRAME = "camera_optical_frame"
+LASER_FRAME = "laser"
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 ODOM_TOPIC = "/odom"
 GROUND_TRUTH_TOPIC = "/ground_truth"
+AMCL_POSE_TOPIC = "/amcl_pose"
 POINTS_TOPIC = "/camera/depth/points"
 IMAGE_TOPIC = "/camera/depth/image_raw"
 CAMERA_INFO_TOPIC = "/camera/depth/camera_info"
+SCAN_TOPIC = "/scan"
 
 # camera_link → optical frame, REP-103: the quaternion (x, y, z, w) of R_LINK_OPTICAL.
 OPTICAL_QUATERNION = (-0.5, 0.5, -0.5, 0.5)
@@ -69,6 +81,13 @@ _FLOAT32 = 7  # sensor_msgs/PointField datatype
 # map → odom is published every third sample of the doubled-rate trajectory: 10 Hz for a
 # 15 Hz sensor. The correction is smooth, so interpolating it is exact to < 0.1 mm.
 _MAP_ODOM_EVERY = 3
+
+# Covariance of /amcl_pose, row-major 6x6 over (x, y, z, roll, pitch, yaw): a converged
+# localiser's 2 cm and 1 degree; like AMCL, the dimensions it does not estimate are 0.
+AMCL_COVARIANCE = np.zeros(36)
+AMCL_COVARIANCE[[0, 7]] = 0.02**2
+AMCL_COVARIANCE[35] = math.radians(1.0) ** 2
+AMCL_COVARIANCE.flags.writeable = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -234,7 +253,7 @@ def _tf_message(sink: _BagSink, *transforms: Any) -> Any:
     return sink.types["tf2_msgs/msg/TFMessage"](transforms=list(transforms))
 
 
-def _static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
+def _camera_static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
     half = math.radians(-camera.tilt_deg) / 2  # rotation about y, see Camera.R_base_link
     return _tf_message(
         sink,
@@ -255,6 +274,21 @@ def _static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
             OPTICAL_FRAME,
             (0.0, 0.0, 0.0),
             OPTICAL_QUATERNION,
+        ),
+    )
+
+
+def _laser_static_tf(sink: _BagSink, stamp_ns: int, scanner: Scanner) -> Any:
+    return _tf_message(
+        sink,
+        _transform(
+            sink,
+            TF_STATIC_TOPIC,
+            stamp_ns,
+            BASE_FRAME,
+            LASER_FRAME,
+            scanner.mount_xyz,
+            (0.0, 0.0, 0.0, 1.0),
         ),
     )
 
@@ -285,6 +319,16 @@ def _odometry(
                 angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=twist[2]),
             ),
             covariance=covariance.copy(),
+        ),
+    )
+
+
+def _amcl_pose(sink: _BagSink, stamp_ns: int, pose: tuple[float, float, float]) -> Any:
+    t = sink.types
+    return t["geometry_msgs/msg/PoseWithCovarianceStamped"](
+        header=sink.header(AMCL_POSE_TOPIC, stamp_ns, MAP_FRAME),
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](
+            pose=_pose(sink, *pose), covariance=AMCL_COVARIANCE.copy()
         ),
     )
 
@@ -341,6 +385,24 @@ def _depth_image(
     )
 
 
+def _laser_scan(
+    sink: _BagSink, stamp_ns: int, ranges: np.ndarray, scanner: Scanner, rate_hz: float
+) -> Any:
+    # REP 117: +inf is "nothing within range"; the renderer's NaN means just that here.
+    return sink.types["sensor_msgs/msg/LaserScan"](
+        header=sink.header(SCAN_TOPIC, stamp_ns, LASER_FRAME),
+        angle_min=scanner.angle_min,
+        angle_max=scanner.angle_max,
+        angle_increment=scanner.angle_increment,
+        time_increment=0.0,  # all beams at the header stamp: the scan is not skewed
+        scan_time=1.0 / rate_hz,
+        range_min=scanner.range_min,
+        range_max=scanner.range_max,
+        ranges=np.where(np.isnan(ranges), np.inf, ranges).astype(np.float32),
+        intensities=np.zeros(0, dtype=np.float32),
+    )
+
+
 def _camera_info(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
     t = sink.types
     projection = np.hstack([camera.K, np.zeros((3, 1))]).ravel()
@@ -369,29 +431,36 @@ def write_scene_bag(
     fmt: BagFormat,
     sensor: SensorKind,
     camera: Camera | None = None,
+    scanner: Scanner | None = None,
     plan: FloorPlan | None = None,
     rate_hz: float = 15.0,
     compress: bool = False,
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
-    Topics: /tf_static (base_link → camera_link → camera_optical_frame), /tf (odom →
-    base_link at the sensor stamps and midway between them, map → odom at 2/3 of the
-    sensor rate), /odom (drifting odometry at sensor stamps), /ground_truth (true pose in
-    map), and either /camera/depth/points (organized PointCloud2, fields x, y, z, rgb,
-    point_step 32, NaN for no return) or /camera/depth/image_raw (16UC1 millimetres with
-    0 for no return, or 32FC1 metres with NaN) with /camera/depth/camera_info. Header
-    stamps and bag times are the trajectory stamps. ``map → odom ∘ odom → base_link``,
-    interpolated at a sensor stamp, is the true pose to well under 1 mm.
+    Topics: /tf_static (base_link → camera_link → camera_optical_frame for the camera,
+    base_link → laser for the scanner), /tf (odom → base_link at the sensor stamps and
+    midway between them, map → odom at 2/3 of the sensor rate), /odom (drifting odometry at
+    sensor stamps), /ground_truth (true pose in map), /amcl_pose (the true pose again, with
+    a 2 cm / 1 degree covariance, as from a localiser), and the sensor data: either
+    /camera/depth/points (organized PointCloud2, fields x, y, z, rgb, point_step 32, NaN for
+    no return), /camera/depth/image_raw (16UC1 millimetres with 0 for no return, or 32FC1
+    metres with NaN) with /camera/depth/camera_info, or /scan (LaserScan in frame laser,
+    +inf for no return). Header stamps and bag times are the trajectory stamps.
+    ``map → odom ∘ odom → base_link``, interpolated at a sensor stamp, is the true pose to
+    well under 1 mm.
 
     Args:
         path: Bag to create: a file for ROS 1, a folder for ROS 2; must not exist.
         seed: Seed of everything: the plan (``generate_floorplan(seed)`` unless ``plan``
-            is given), the trajectory, the odometry drift and the depth noise.
+            is given), the trajectory, the odometry drift and the sensor noise.
         n_frames: Sensor frames to write; fewer if the route ends first.
         fmt: Bag format.
-        sensor: What the depth sensor publishes.
-        camera: Sensor and mount; the default is a 160 x 120 Kinect-like camera.
+        sensor: What the sensor publishes: a depth camera's cloud or image, or a scan.
+        camera: Depth camera and mount (not used for ``laserscan``); the default is a
+            160 x 120 Kinect-like camera.
+        scanner: Laser scanner and mount (used only for ``laserscan``); default
+            :class:`Scanner`.
         plan: Scene to drive through (must have a route); generated if None.
         rate_hz: Sensor frame rate.
         compress: LZ4 chunk compression (ROS 1 only), for bags that ship in a repository.
@@ -405,7 +474,9 @@ def write_scene_bag(
     if n_frames < 1:
         raise ValueError("n_frames must be positive")
     path = Path(path)
+    laser = sensor == "laserscan"
     camera = Camera() if camera is None else camera
+    scanner = Scanner() if scanner is None else scanner
     plan = generate_floorplan(seed) if plan is None else plan
     traj_seed, odom_seed, noise_seed = _sub_seeds(seed, 3)
 
@@ -426,13 +497,21 @@ def write_scene_bag(
         tf = sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage")
         odom_conn = sink.topic(ODOM_TOPIC, "nav_msgs/msg/Odometry")
         truth_conn = sink.topic(GROUND_TRUTH_TOPIC, "geometry_msgs/msg/PoseStamped")
-        if sensor == "pointcloud":
+        if laser:
+            sensor_conn = sink.topic(SCAN_TOPIC, "sensor_msgs/msg/LaserScan")
+        elif sensor == "pointcloud":
             sensor_conn = sink.topic(POINTS_TOPIC, "sensor_msgs/msg/PointCloud2")
         else:
             sensor_conn = sink.topic(IMAGE_TOPIC, "sensor_msgs/msg/Image")
             info_conn = sink.topic(CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo")
+        # Opened last so that the other topics keep the connection ids they always had.
+        amcl_conn = sink.topic(AMCL_POSE_TOPIC, "geometry_msgs/msg/PoseWithCovarianceStamped")
 
-        sink.write(tf_static, stamps_ns[0], _static_tf(sink, stamps_ns[0], camera))
+        if laser:
+            static = _laser_static_tf(sink, stamps_ns[0], scanner)
+        else:
+            static = _camera_static_tf(sink, stamps_ns[0], camera)
+        sink.write(tf_static, stamps_ns[0], static)
         for k, stamp_ns in enumerate(stamps_ns):
             odom_pose = _se2(*odom.pose_at(k))
             if k % _MAP_ODOM_EVERY == 0 or k == len(stamps_ns) - 1:
@@ -454,16 +533,26 @@ def write_scene_bag(
                     pose=_pose(sink, *pose),
                 ),
             )
-            depth, hit_wall = render_depth(plan, *pose, camera, rng)
-            for wall_id in walls_seen(hit_wall, depth, camera):
-                seen_counts[wall_id] += 1
-            if sensor == "pointcloud":
-                sink.write(sensor_conn, stamp_ns, _point_cloud(sink, stamp_ns, depth, camera))
+            sink.write(amcl_conn, stamp_ns, _amcl_pose(sink, stamp_ns, pose))
+            if laser:
+                ranges, hit_wall = render_scan(plan, *pose, scanner, rng)
+                seen = scan_walls_seen(hit_wall, ranges)
+                scan = _laser_scan(sink, stamp_ns, ranges, scanner, rate_hz)
+                sink.write(sensor_conn, stamp_ns, scan)
             else:
-                image = _depth_image(sink, stamp_ns, depth, camera, sensor)
-                sink.write(sensor_conn, stamp_ns, image)
-                sink.write(info_conn, stamp_ns, _camera_info(sink, stamp_ns, camera))
+                depth, hit_wall = render_depth(plan, *pose, camera, rng)
+                seen = walls_seen(hit_wall, depth, camera)
+                if sensor == "pointcloud":
+                    cloud = _point_cloud(sink, stamp_ns, depth, camera)
+                    sink.write(sensor_conn, stamp_ns, cloud)
+                else:
+                    image = _depth_image(sink, stamp_ns, depth, camera, sensor)
+                    sink.write(sensor_conn, stamp_ns, image)
+                    sink.write(info_conn, stamp_ns, _camera_info(sink, stamp_ns, camera))
+            for wall_id in seen:
+                seen_counts[wall_id] += 1
 
+    mount = {"scanner": scanner.to_json()} if laser else {"camera": camera.to_json()}
     truth_path = truth_path_for(path)
     truth_path.write_text(
         json.dumps(
@@ -473,7 +562,7 @@ def write_scene_bag(
                 "sensor": sensor,
                 "rate_hz": rate_hz,
                 "n_frames": n_frames,
-                "camera": camera.to_json(),
+                **mount,
                 "plan": plan.to_json(),
                 "trajectory": truth.to_json(),
                 "stamps_ns": stamps_ns[::2],

@@ -1,4 +1,8 @@
-"""Depth images of a floor plan by vectorised ray casting, as a Kinect-like sensor sees it."""
+"""Depth images and laser scans of a floor plan by vectorised ray casting.
+
+A Kinect-like depth camera sees walls, furniture, floor and ceiling; a 2-D laser scanner
+casts horizontal rays at its mount height and sees only what stands that tall.
+"""
 
 from __future__ import annotations
 
@@ -95,6 +99,58 @@ class Camera:
         return cls(**{**data, "mount_xyz": tuple(data["mount_xyz"])})
 
 
+@dataclass(frozen=True)
+class Scanner:
+    """A planar laser scanner on the robot: 270 degrees in 0.5 degree steps, up to 8 m.
+
+    Attributes:
+        angle_min: Angle of the first beam, counter-clockwise from the laser's x axis.
+        angle_max: Angle of the last beam.
+        n_beams: Number of beams, evenly spaced from ``angle_min`` to ``angle_max``.
+        range_min: Nearer ranges give no return.
+        range_max: Farther ranges give no return.
+        noise_sigma: Range noise sigma in metres, the same at every distance.
+        mount_xyz: Position of the laser frame in base_link; the default height clears
+            the furniture (at most 1.1 m), so the scan sees the walls behind it.
+    """
+
+    angle_min: float = -3 * math.pi / 4
+    angle_max: float = 3 * math.pi / 4
+    n_beams: int = 541
+    range_min: float = 0.1
+    range_max: float = 8.0
+    noise_sigma: float = 0.01
+    mount_xyz: tuple[float, float, float] = (0.15, 0.0, 1.2)
+
+    @property
+    def angle_increment(self) -> float:
+        """Angle between neighbouring beams (0.5 degrees by default)."""
+        return (self.angle_max - self.angle_min) / (self.n_beams - 1)
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Beam angles (n_beams,) in the laser frame, as a LaserScan reader computes them."""
+        return self.angle_min + self.angle_increment * np.arange(self.n_beams)
+
+    @property
+    def T_base_laser(self) -> np.ndarray:  # noqa: N802 - transform naming T_parent_child
+        """Pose (4, 4) of the laser frame in base_link: level and facing forward."""
+        transform = np.eye(4)
+        transform[:3, 3] = self.mount_xyz
+        return transform
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain-JSON form for ground-truth files."""
+        data = asdict(self)
+        data["mount_xyz"] = list(self.mount_xyz)
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Scanner:
+        """Inverse of :meth:`to_json`."""
+        return cls(**{**data, "mount_xyz": tuple(data["mount_xyz"])})
+
+
 @lru_cache(maxsize=8)
 def _pixel_rays(camera: Camera) -> np.ndarray:
     """Ray per pixel (h*w, 3) in the optical frame, scaled so that z = 1 (t is depth)."""
@@ -185,6 +241,31 @@ def _nearest_box_top(origin: np.ndarray, rays: np.ndarray, geo: _Geometry) -> np
     return t.min(axis=1)
 
 
+def _cast_vertical(
+    geo: _Geometry, origin: np.ndarray, rays: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First hit of each ray on the walls and box sides: (t, wall id or -1, glass).
+
+    Segments farther than ``reach`` (the longest in-range ray) cannot matter and are skipped;
+    rays are cast in chunks so that the (rays x segments) temporaries stay small.
+    """
+    near = point_segment_distance(origin[None, :2], geo.seg_a, geo.seg_a + geo.seg_e)[0]
+    keep = np.flatnonzero(near <= reach)
+    n = len(rays)
+    t_hit = np.full(n, np.inf)
+    label = np.full(n, -1, dtype=np.int32)
+    glass = np.zeros(n, dtype=bool)
+    if len(keep):
+        a, e, top = geo.seg_a[keep], geo.seg_e[keep], geo.seg_top[keep]
+        for start in range(0, n, _CHUNK_RAYS):
+            chunk = slice(start, start + _CHUNK_RAYS)
+            t, index = _nearest_vertical(origin, rays[chunk], a, e, top)
+            t_hit[chunk] = t
+            label[chunk] = geo.seg_label[keep][index]
+            glass[chunk] = geo.seg_glass[keep][index]
+    return t_hit, label, glass
+
+
 def render_depth(
     plan: FloorPlan,
     x: float,
@@ -221,23 +302,9 @@ def render_depth(
     origin = np.array([x, y, 0.0]) + r_world_base @ mount[:3, 3]
     rays = rays_cam @ (r_world_base @ mount[:3, :3]).T
 
-    # Segments farther than any in-range hit could be cannot matter: skip them.
     reach = camera.max_range * float(np.linalg.norm(rays_cam, axis=1).max())
-    near = point_segment_distance(origin[None, :2], geo.seg_a, geo.seg_a + geo.seg_e)[0]
-    keep = np.flatnonzero(near <= reach)
-
+    depth, label, glass = _cast_vertical(geo, origin, rays, reach)
     n = len(rays)
-    depth = np.full(n, np.inf)
-    label = np.full(n, -1, dtype=np.int32)
-    glass = np.zeros(n, dtype=bool)
-    if len(keep):
-        a, e, top = geo.seg_a[keep], geo.seg_e[keep], geo.seg_top[keep]
-        for start in range(0, n, _CHUNK_RAYS):
-            chunk = slice(start, start + _CHUNK_RAYS)
-            t, index = _nearest_vertical(origin, rays[chunk], a, e, top)
-            depth[chunk] = t
-            label[chunk] = geo.seg_label[keep][index]
-            glass[chunk] = geo.seg_glass[keep][index]
 
     rz = rays[:, 2]
     with np.errstate(divide="ignore"):
@@ -290,3 +357,59 @@ def walls_seen(
     pairs = np.unique(hit_wall[mask].astype(np.int64) * camera.width + cols)
     ids, counts = np.unique(pairs // camera.width, return_counts=True)
     return {int(i) for i, k in zip(ids, counts, strict=True) if k >= min_columns}
+
+
+def render_scan(
+    plan: FloorPlan,
+    x: float,
+    y: float,
+    yaw: float,
+    scanner: Scanner,
+    rng: np.random.Generator | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Laser scan taken with base_link at (x, y, yaw).
+
+    The beams are horizontal at the mount height, so they hit walls and only the furniture
+    that reaches that high; floor and ceiling are never seen. A beam whose first hit is glass
+    gets no return, as do measured ranges outside [range_min, range_max].
+
+    Args:
+        plan: The scene.
+        x: Position of base_link in the map frame.
+        y: Position of base_link in the map frame.
+        yaw: Heading of base_link in the map frame.
+        scanner: Sensor and mount.
+        rng: Source of range noise (sigma = noise_sigma); None for an exact scan.
+
+    Returns:
+        ranges: float32 (n_beams,), metres from the laser frame's origin, NaN where no
+        return.
+        hit_wall: int32 (n_beams,), id of the wall each beam hit first within range (glass
+        included, though it gives no return), -1 for furniture, out of range or nothing.
+    """
+    geo = _geometry(plan)
+    c, s = math.cos(yaw), math.sin(yaw)
+    mount = scanner.mount_xyz
+    origin = np.array([x + c * mount[0] - s * mount[1], y + s * mount[0] + c * mount[1], mount[2]])
+    angles = yaw + scanner.angles
+    rays = np.stack([np.cos(angles), np.sin(angles), np.zeros(scanner.n_beams)], axis=1)
+    ranges, label, glass = _cast_vertical(geo, origin, rays, scanner.range_max)
+
+    hit = np.isfinite(ranges)
+    if rng is not None and scanner.noise_sigma > 0:
+        ranges = ranges + rng.normal(size=scanner.n_beams) * scanner.noise_sigma * hit
+    in_range = hit & (ranges >= scanner.range_min) & (ranges <= scanner.range_max)
+    label[~in_range] = -1
+    valid = in_range & ~glass
+    return np.where(valid, ranges, np.nan).astype(np.float32), label
+
+
+def scan_walls_seen(hit_wall: np.ndarray, ranges: np.ndarray, *, min_beams: int = 15) -> set[int]:
+    """Ids of the walls the detector can see in this scan.
+
+    A wall counts as seen when at least ``min_beams`` beams return from it (about 7 degrees
+    at the default resolution), enough points for a line fit; glass never returns.
+    """
+    mask = (hit_wall >= 0) & np.isfinite(ranges)
+    ids, counts = np.unique(hit_wall[mask], return_counts=True)
+    return {int(i) for i, k in zip(ids, counts, strict=True) if k >= min_beams}

@@ -1,9 +1,10 @@
-"""Sensor trajectories through a floor plan, and drifting odometry estimates of them."""
+"""Sensor trajectories through a floor plan, drifting odometry estimates of them, TUM files."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -178,3 +179,38 @@ def drifting_odometry(
     odo_x = traj.x[0] + np.concatenate([[0.0], np.cumsum(co * fwd_o - so * lat_o)])
     odo_y = traj.y[0] + np.concatenate([[0.0], np.cumsum(so * fwd_o + co * lat_o)])
     return Trajectory(traj.stamps.copy(), odo_x, odo_y, _wrap(odo_yaw))
+
+
+def write_tum(trajectory: Trajectory, path: str | Path) -> None:
+    """Write a trajectory in the TUM RGB-D format, for evaluation tools and ``tum:FILE``.
+
+    One line per pose, ``t x y z qx qy qz qw``: stamp in seconds with nanosecond digits so
+    that it matches the bag's header stamps, z = 0 and the quaternion (scalar last) of a
+    rotation by yaw about z. A ``#`` line names the columns.
+    """
+    half = trajectory.yaw / 2
+    rows = np.column_stack(
+        [
+            trajectory.x,
+            trajectory.y,
+            np.zeros(len(trajectory)),
+            np.zeros(len(trajectory)),
+            np.zeros(len(trajectory)),
+            np.sin(half),
+            np.cos(half),
+        ]
+    )
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    lines += [
+        f"{stamp:.9f} " + " ".join(f"{v:.9f}" for v in row)
+        for stamp, row in zip(trajectory.stamps, rows, strict=True)
+    ]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def read_tum(path: str | Path) -> Trajectory:
+    """Read a TUM trajectory file as planar poses; z and any roll or pitch are dropped."""
+    data = np.loadtxt(path, comments="#", ndmin=2)
+    qx, qy, qz, qw = data[:, 4:8].T
+    yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    return Trajectory(data[:, 0], data[:, 1], data[:, 2], yaw)

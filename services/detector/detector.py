@@ -10,6 +10,8 @@ from wallmap.common.messages import Frame, Observations, WallObservation
 from wallmap.common.ransac import RansacParams, detect_lines
 from wallmap.services.detector.scan_row import RowSelection, select_scan
 
+SCANNER = RansacParams(noise_k=0.0, sigma_floor=0.01, inlier_min=0.03)  # a 2-D lidar, ~1 cm
+
 
 @dataclass(frozen=True)
 class DetectorConfig:
@@ -17,7 +19,9 @@ class DetectorConfig:
 
     Attributes:
         rows: how the scan row is chosen from the cloud.
-        ransac: the line search.
+        ransac: the line search in a depth camera's row (noise growing with range squared).
+        scan_ransac: the line search in a 2-D scanner's row (frames of one row): a lidar's
+            noise is about constant with range.
         min_distance: walls whose line passes closer than this to the robot are refused (m):
             nothing real is that close, and (u, v) degenerates there.
         seed: seed of the RANSAC sampler, so a run can be repeated exactly.
@@ -25,6 +29,7 @@ class DetectorConfig:
 
     rows: RowSelection = field(default_factory=RowSelection)
     ransac: RansacParams = field(default_factory=RansacParams)
+    scan_ransac: RansacParams = SCANNER
     min_distance: float = 0.1
     seed: int = 0
 
@@ -39,6 +44,8 @@ class WallDetector:
     def detect(self, frame: Frame) -> Observations:
         """All walls seen in one frame (an empty list when there are none)."""
         scan = select_scan(frame.points, frame.base_from_sensor, self.config.rows)
+        is_scanner = frame.points.shape[0] == 1
+        params = self.config.scan_ransac if is_scanner else self.config.ransac
         walls = [
             WallObservation(
                 closest=line.closest,
@@ -48,7 +55,7 @@ class WallDetector:
                 n_points=line.n_points,
                 rms=line.rms,
             )
-            for line in detect_lines(scan, self.config.ransac, self._rng)
+            for line in detect_lines(scan, params, self._rng)
             if line.offset >= self.config.min_distance
         ]
         return Observations(

@@ -34,11 +34,16 @@ class PoseBufferConfig:
         max_age: poses older than the newest by more than this are forgotten (s).
         max_gap: longest time between two poses that is interpolated across (s).
         tolerance: how far beyond the first or last pose a stamp may be and still take it (s).
+        jump_distance: a move this far (m) between consecutive poses is logged as a jump...
+        jump_angle: ...and so is a turn this large (rad): a localiser may jump (REP-105), but a
+            user should see it when walls come out doubled.
     """
 
     max_age: float = 120.0
     max_gap: float = 0.5
     tolerance: float = 0.02
+    jump_distance: float = 0.5
+    jump_angle: float = 0.5
 
 
 def _interpolate(a: Pose, b: Pose, stamp: float) -> Pose:
@@ -77,6 +82,8 @@ class PoseBuffer:
             self._stamps.clear()
             self._poses.clear()
         i = bisect.bisect_left(self._stamps, pose.stamp)
+        if i == len(self._stamps) and self._poses:
+            self._warn_jump(self._poses[-1], pose)
         if i < len(self._stamps) and self._stamps[i] == pose.stamp:
             self._poses[i] = pose
         else:
@@ -86,6 +93,18 @@ class PoseBuffer:
         if cut:
             del self._stamps[:cut]
             del self._poses[:cut]
+
+    def _warn_jump(self, last: Pose, pose: Pose) -> None:
+        distance = math.hypot(pose.x - last.x, pose.y - last.y)
+        turn = abs(math.remainder(pose.yaw - last.yaw, 2.0 * math.pi))
+        if distance > self.config.jump_distance or turn > self.config.jump_angle:
+            log.warning(
+                "pose jumped by %.2f m and %.1f deg in %.3f s at %.3f",
+                distance,
+                math.degrees(turn),
+                pose.stamp - last.stamp,
+                pose.stamp,
+            )
 
     def lookup(self, stamp: float) -> Pose | Lookup:
         """The pose at ``stamp``, or why there is none."""

@@ -20,17 +20,19 @@ from pathlib import Path
 import zenoh
 
 from wallmap.common.codec import MessageError, encode
-from wallmap.common.messages import Observations, Progress, pack, unpack_observations, unpack_pose
+from wallmap.common.messages import Observations, Progress, pack, unpack_observations
 from wallmap.common.runtime import Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
+from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
 from wallmap.services.mapper.wall_map import MapperConfig, WallMap
 
 QUEUE_DEPTH = 64
 MAX_PENDING = 512
 MAX_RUNS = 16
 ACK_EVERY = 8  # frames between acknowledgements while busy
+DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 
 
 @dataclass(frozen=True)
@@ -40,12 +42,16 @@ class MapperSettings:
     Attributes:
         state: file the map is kept in across restarts, or None.
         pose_key: key expression the poses come from (default: the prefix's pose key).
+        pose_format: ``wallmap`` or ``ros2:<type>`` (CDR from a ROS 2 system, see pose_input).
+        pose_frames: ``PARENT>CHILD`` of the pose, for ``ros2:tf2_msgs/msg/TFMessage``.
         pose_wait: longest an observation waits for its pose (s, wall clock).
         save_every: seconds between state saves while the map changes.
     """
 
     state: Path | None = None
     pose_key: str | None = None
+    pose_format: str = "wallmap"
+    pose_frames: str = "map>base_link"
     pose_wait: float = 5.0
     save_every: float = 2.0
     map: MapperConfig = field(default_factory=MapperConfig)
@@ -83,6 +89,9 @@ class MapperCore:
             body = self.map.reply(min_obs=min_obs, trajectory=trajectory)
             counts = self.stats.snapshot()
         body["dropped"] = counts.get("dropped", 0)
+        body["dropped_reasons"] = {
+            reason: counts.get(f"dropped.{reason}", 0) for reason in DROP_REASONS.values()
+        }
         body["refused"] = counts.get("refused", 0)
         return body
 
@@ -96,6 +105,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     if wall_map.walls:
         log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
     core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats)
+    pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings) as session:
@@ -106,7 +116,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
         )
         queryable = session.declare_queryable(keys.map_walls)
         workers = [
-            threading.Thread(target=_poses, args=(pose_sub.handler, core), daemon=True),
+            threading.Thread(target=_poses, args=(pose_sub.handler, core, pose_input), daemon=True),
             threading.Thread(
                 target=_observations,
                 args=(obs_sub.handler, core, progress, mapper.pose_wait),
@@ -141,17 +151,20 @@ def _save(core: MapperCore, path: Path | None) -> None:
     state_file.write(path, document)
 
 
-def _poses(channel: zenoh.handlers.Handler[zenoh.Sample], core: MapperCore) -> None:
+def _poses(
+    channel: zenoh.handlers.Handler[zenoh.Sample], core: MapperCore, pose_input: PoseInput
+) -> None:
     for sample in drain(channel):
         try:
-            pose = unpack_pose(sample.payload.to_bytes())
+            poses = pose_input.decode(sample.payload.to_bytes(), str(sample.key_expr))
         except MessageError as err:
             core.stats.refuse("pose", str(err))
             continue
         with core.lock:
-            core.poses.add(pose)
+            for pose in poses:
+                core.poses.add(pose)
             core.lock.notify_all()
-        core.stats.add("poses")
+        core.stats.add("poses", len(poses))
 
 
 def _observations(
@@ -211,8 +224,18 @@ def _process_head(
     if integrated:
         core.stats.add("integrated")
     else:
+        reason = DROP_REASONS[pose]
         core.stats.add("dropped")
-        core.stats.add(f"dropped.{pose.value}")
+        core.stats.note(
+            f"dropped.{reason}",
+            reason,
+            f"dropped the frame at {obs.stamp:.3f}: "
+            + (
+                f"no pose covered it within {pose_wait:.1f} s (is the pose source running?)"
+                if pose is Lookup.WAIT
+                else "no pose near its stamp (before the first pose, or in a gap)"
+            ),
+        )
     return True
 
 

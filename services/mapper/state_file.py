@@ -33,6 +33,7 @@ def to_json(wall_map: WallMap) -> dict[str, Any]:
         "observations": wall_map.observations,
         "stamp": wall_map.stamp,
         "trajectory": wall_map.trajectory,
+        "merges": wall_map.merges,
         "walls": [
             {
                 "id": w.id,
@@ -59,6 +60,7 @@ def from_json(data: dict[str, Any], config: MapperConfig) -> WallMap:
     wall_map.frames = int(data["frames"])
     wall_map.observations = int(data["observations"])
     wall_map.stamp = None if data["stamp"] is None else float(data["stamp"])
+    wall_map.merges = [(int(a), int(b), float(t)) for a, b, t in data["merges"]]
     wall_map.trajectory = [
         (float(t), float(x), float(y), float(a)) for t, x, y, a in data["trajectory"]
     ]

@@ -35,6 +35,9 @@ class MapperConfig:
             extent is another wall on the same line (m).
         pose_cov: x/y/yaw covariance assumed for poses that carry none: no pose source is exact,
             and without it a wall seen a hundred times would refuse the next good observation.
+        merge_angle: two walls whose lines differ by less than this angle (rad)...
+        merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
+            they merge, and the older id survives. 5 cm keeps the two faces of a real wall apart.
         keyframe_distance: the trajectory kept with the map has a pose every this far (m)...
         keyframe_angle: ...or every this much turn (rad).
     """
@@ -42,6 +45,8 @@ class MapperConfig:
     gate: float = ekf.CHI2_2DOF_999
     max_extent_gap: float = 1.0
     pose_cov: Array = field(default_factory=_default_pose_cov)
+    merge_angle: float = np.radians(2.0)
+    merge_offset: float = 0.05
     keyframe_distance: float = 0.1
     keyframe_angle: float = np.radians(5.0)
 
@@ -98,6 +103,7 @@ class WallMap:
         self.observations = 0
         self.stamp: float | None = None
         self.trajectory: list[tuple[float, float, float, float]] = []  # stamp, x, y, yaw
+        self.merges: list[tuple[int, int, float]] = []  # (merged id, surviving id, stamp)
 
     def integrate(self, frame: Observations, pose: Pose) -> list[int]:
         """Fold one frame's observations in; returns the wall id each observation went to."""
@@ -140,15 +146,42 @@ class WallMap:
         wall.extend(seg)
         wall.n_obs += 1
         wall.last_seen = max(wall.last_seen, stamp)
-        return wall.id
+        return self._merge_duplicates(wall, stamp).id
 
-    def _near(self, seg: Array) -> list[Wall]:
-        """Walls whose extent comes within ``max_extent_gap`` of the observed segment."""
+    def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
+        """Merge walls that have converged onto ``wall``'s line over a shared extent."""
+        for other in self._near(wall.ends, max_gap=0.0):
+            if other.id in self.walls and other is not wall and self._same_wall(wall, other):
+                keep, gone = (wall, other) if wall.id < other.id else (other, wall)
+                keep.s, keep.p = ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor)
+                keep.extend(gone.ends)
+                keep.n_obs += gone.n_obs
+                keep.first_seen = min(keep.first_seen, gone.first_seen)
+                keep.last_seen = max(keep.last_seen, gone.last_seen)
+                del self.walls[gone.id]
+                self.merges.append((gone.id, keep.id, stamp))
+                wall = keep
+        return wall
+
+    def _same_wall(self, a: Wall, b: Wall) -> bool:
+        """Lines within ``merge_angle`` and ``merge_offset`` where the extents overlap."""
+        na, nb = a.s / np.linalg.norm(a.s), b.s / np.linalg.norm(b.s)
+        if np.arccos(min(abs(float(na @ nb)), 1.0)) > self.config.merge_angle:
+            return False
+        ta, tb = a.along(a.ends), a.along(b.ends)
+        middle = 0.5 * (max(ta.min(), tb.min()) + min(ta.max(), tb.max()))
+        point = wall_model.foot(a.s, a.anchor) + middle * wall_model.direction(a.s)
+        offset = abs(float(nb @ (point - wall_model.foot(b.s, b.anchor))))
+        return offset <= self.config.merge_offset
+
+    def _near(self, seg: Array, max_gap: float | None = None) -> list[Wall]:
+        """Walls whose extent comes within ``max_gap`` (default ``max_extent_gap``) of a segment."""
+        limit = self.config.max_extent_gap if max_gap is None else max_gap
         near = []
-        for wall in self.walls.values():
+        for wall in list(self.walls.values()):
             t_obs, t_wall = wall.along(seg), wall.along(wall.ends)
             gap = max(t_obs.min() - t_wall.max(), t_wall.min() - t_obs.max())
-            if gap <= self.config.max_extent_gap:
+            if gap <= limit:
                 near.append(wall)
         return near
 
@@ -170,6 +203,7 @@ class WallMap:
             "observations": self.observations,
             "stamp": self.stamp,
             "walls": [w.to_reply() for w in self.walls.values() if w.n_obs >= min_obs],
+            "merges": [list(m) for m in self.merges],
         }
         if trajectory:
             body["trajectory"] = [list(p) for p in self.trajectory]

@@ -18,24 +18,28 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
+from wallmap.common.messages import Pose
+from wallmap.common.ros_poses import (
+    DEFAULT_CHILD,
+    header_stamp,
+    pose_from_matrix,
+    pose_from_message,
+)
+from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
 from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xyz
-from wallmap.services.player.errors import PlayerError, TfError
-from wallmap.services.player.frames import Pose2D, SensorFrame, header_stamp
+from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.laserscan import laserscan_to_xyz
 from wallmap.services.player.pointcloud import pointcloud2_to_xyz
 from wallmap.services.player.pose_sources import (
-    DEFAULT_CHILD,
     PoseSourceSpec,
     PoseTrack,
     load_tum,
     parse_pose_source,
-    pose_from_matrix,
-    pose_from_message,
     resolve_pose_topic,
 )
-from wallmap.services.player.tf_buffer import TfBuffer, normalize_frame
 
-__all__ = ["BagSource", "Pose2D", "SensorFrame"]
+__all__ = ["BagSource", "SensorFrame"]
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 IMAGE = "sensor_msgs/msg/Image"
@@ -117,7 +121,7 @@ def _namespace(topic: str) -> str:
     return topic.lstrip("/").rpartition("/")[0]
 
 
-def _planar_matrix(pose: Pose2D) -> np.ndarray:
+def _planar_matrix(pose: Pose) -> np.ndarray:
     """The 4x4 transform of a planar pose (frame <- child)."""
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     return np.array(
@@ -337,7 +341,7 @@ class BagSource:
         connections = [c for name in wanted for c in self._topics[name].connections]
 
         camera_info = None
-        poses: list[Pose2D] = []
+        poses: list[Pose] = []
         invalid: list[str] = []
         for connection, receive_ns, msg in self._messages(connections):
             topic = connection.topic
@@ -413,7 +417,7 @@ class BagSource:
             f"{self._tf.no_path_message(self.base_frame, frame_id)}"
         )
 
-    def _pose_at(self, stamp: float) -> Pose2D | None:
+    def _pose_at(self, stamp: float) -> Pose | None:
         """The base frame's pose at a sensor stamp, or None where the source does not cover it."""
         spec = self.pose_spec
         if spec.kind == "tf":
@@ -446,7 +450,7 @@ class BagSource:
         except Exception as err:  # damaged chunks surface as assorted library errors
             raise _unreadable(self.path, err) from err
 
-    def frames(self) -> Iterator[tuple[SensorFrame, Pose2D | None]]:
+    def frames(self) -> Iterator[tuple[SensorFrame, Pose | None]]:
         """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
 
         Raises:

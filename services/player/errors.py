@@ -8,7 +8,3 @@ traceback, so the message must say what is wrong and, where possible, what to do
 
 class PlayerError(Exception):
     """A problem with the player's input that the user can fix (bag, topic, pose source)."""
-
-
-class TfError(PlayerError):
-    """A tf lookup that cannot be answered: unknown frame, no path, or extrapolation."""

@@ -13,17 +13,18 @@ from typing import Any, Literal
 
 import numpy as np
 
+from wallmap.common.messages import Pose
+from wallmap.common.ros_poses import (
+    DEFAULT_CHILD,
+    DEFAULT_PARENT,
+    ODOMETRY_TYPE,
+    POSE_TYPES,
+    yaw_from_quaternion,
+)
+from wallmap.common.tf_buffer import normalize_frame
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.frames import Pose2D, header_stamp
-from wallmap.services.player.tf_buffer import normalize_frame
 
 ACCEPTED_FORMS = "tf, tf:PARENT>CHILD, odom, odom:TOPIC, pose, pose:TOPIC, tum:FILE, none"
-ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
-POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
-DEFAULT_PARENT = "map"
-DEFAULT_CHILD = "base_link"
-# Indices of x, y and yaw (rotation about z) in ROS's row-major 6x6 pose covariance.
-_PLANAR = np.ix_([0, 1, 5], [0, 1, 5])
 
 PoseSourceKind = Literal["tf", "odom", "pose", "tum", "none"]
 
@@ -130,55 +131,6 @@ def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str:
     return matches[0]
 
 
-def yaw_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> float:
-    """Heading about z of a rotation, assuming the robot stays level (planar motion)."""
-    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-
-
-def planar_covariance(covariance: Any) -> np.ndarray | None:
-    """The (x, y, yaw) block of a ROS 6x6 pose covariance; None when it is all zero (unset)."""
-    full = np.asarray(covariance, dtype=np.float64).reshape(6, 6)
-    if not full.any():
-        return None
-    return full[_PLANAR]
-
-
-def pose_from_matrix(matrix: np.ndarray, stamp: float, frame: str, child: str) -> Pose2D:
-    """Reduce a 4x4 tf transform (frame <- child) to a planar pose."""
-    yaw = math.atan2(float(matrix[1, 0]), float(matrix[0, 0]))
-    return Pose2D(stamp, float(matrix[0, 3]), float(matrix[1, 3]), yaw, None, frame, child)
-
-
-def pose_from_message(msg: Any, receive_time_ns: int, child: str) -> Pose2D:
-    """Reduce an Odometry, PoseStamped or PoseWithCovarianceStamped message to a planar pose.
-
-    Args:
-        msg: The deserialized message.
-        receive_time_ns: Bag receive time, used when the header stamp is zero.
-        child: Robot frame to report when the message does not name one (only Odometry does).
-
-    Returns:
-        The pose, with the x/y/yaw covariance when the message carries a non-zero one.
-    """
-    stamp = header_stamp(msg.header, receive_time_ns)
-    if msg.__msgtype__ == "geometry_msgs/msg/PoseStamped":
-        pose, cov = msg.pose, None
-    else:
-        pose, cov = msg.pose.pose, planar_covariance(msg.pose.covariance)
-    if msg.__msgtype__ == ODOMETRY_TYPE and msg.child_frame_id:
-        child = normalize_frame(msg.child_frame_id)
-    q = pose.orientation
-    return Pose2D(
-        stamp,
-        float(pose.position.x),
-        float(pose.position.y),
-        yaw_from_quaternion(q.x, q.y, q.z, q.w),
-        cov,
-        normalize_frame(msg.header.frame_id) or DEFAULT_PARENT,
-        child,
-    )
-
-
 def _wrap(angle: np.ndarray | float) -> Any:
     """Wrap angles into [-pi, pi)."""
     return (np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi
@@ -207,7 +159,7 @@ class PoseTrack:
     child: str = DEFAULT_CHILD
 
     @classmethod
-    def from_poses(cls, poses: list[Pose2D]) -> "PoseTrack":
+    def from_poses(cls, poses: list[Pose]) -> "PoseTrack":
         """Build a track from poses in any order; a repeated stamp keeps its last pose.
 
         Raises:
@@ -241,7 +193,7 @@ class PoseTrack:
         """Number of samples."""
         return int(self.stamps.size)
 
-    def at(self, stamp: float, *, tolerance: float = 0.05) -> Pose2D | None:
+    def at(self, stamp: float, *, tolerance: float = 0.05) -> Pose | None:
         """Interpolate the pose at ``stamp``.
 
         Position and covariance interpolate linearly, yaw along the shorter way round the circle.
@@ -269,7 +221,7 @@ class PoseTrack:
         if self.cov is not None:
             mixed = self.cov[lower] + (self.cov[upper] - self.cov[lower]) * weight
             cov = None if np.isnan(mixed).any() else mixed
-        return Pose2D(float(stamp), float(x), float(y), float(yaw), cov, self.frame, self.child)
+        return Pose(float(stamp), float(x), float(y), float(yaw), cov, self.frame, self.child)
 
 
 def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CHILD) -> PoseTrack:
@@ -306,7 +258,7 @@ def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CH
                 f"'t x y z qx qy qz qw', got {content!r}"
             )
         t, x, y, _, qx, qy, qz, qw = values
-        poses.append(Pose2D(t, x, y, yaw_from_quaternion(qx, qy, qz, qw), None, frame, child))
+        poses.append(Pose(t, x, y, yaw_from_quaternion(qx, qy, qz, qw), None, frame, child))
     if not poses:
         raise PlayerError(f"TUM pose file {path} holds no poses")
     return PoseTrack.from_poses(poses)

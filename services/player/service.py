@@ -18,10 +18,10 @@ from pathlib import Path
 import zenoh
 
 from wallmap.common.codec import MessageError
-from wallmap.common.messages import Frame, Pose, pack, unpack_progress
+from wallmap.common.messages import Frame, pack, unpack_progress
 from wallmap.common.runtime import setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.player.bag_source import BagSource, Pose2D
+from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 
 POLL = 0.001  # s between checks of the acknowledgement channel
@@ -71,10 +71,6 @@ class PlayResult:
         if self.integrated is not None:
             line += f"; the mapper integrated {self.integrated}"
         return line
-
-
-def _to_pose(p: Pose2D) -> Pose:
-    return Pose(p.stamp, p.x, p.y, p.yaw, p.cov, p.frame, p.child)
 
 
 def _wait_for_services(
@@ -190,7 +186,7 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                     due = start_wall + (frame.stamp - first_stamp) / player.rate
                     stop.wait(max(0.0, due - time.monotonic()))
                 if pose is not None:
-                    pose_pub.put(pack(_to_pose(pose)))
+                    pose_pub.put(pack(pose))
                     poses += 1
                 message = Frame(
                     run_id,

@@ -11,9 +11,12 @@ from collections import deque
 
 import numpy as np
 
-from wallmap.services.player.errors import TfError
-
 __all__ = ["TfBuffer", "TfError", "normalize_frame", "transform_matrix"]
+
+
+class TfError(LookupError):
+    """A tf lookup that cannot be answered: unknown frame, no path, or extrapolation."""
+
 
 Quaternion = tuple[float, float, float, float]
 Vector3 = tuple[float, float, float]
