@@ -211,3 +211,12 @@ def test_two_faces_of_a_real_wall_stay_apart():
     )
     assert len(wall_map.walls) == 2
     assert wall_map.merges == []
+
+
+def test_pose_jumps_are_logged(caplog):
+    buf = PoseBuffer()
+    buf.add(Pose(1.0, 0.0, 0.0, 0.0))
+    buf.add(Pose(1.1, 0.05, 0.0, 0.0))
+    assert "jumped" not in caplog.text
+    buf.add(Pose(1.2, 2.05, 0.0, 0.0))  # 2 m in 0.1 s: a localiser correcting itself
+    assert "pose jumped by 2.00 m" in caplog.text
