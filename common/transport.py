@@ -167,6 +167,11 @@ class Keys:
         return f"{self.prefix}/map/walls"
 
     @property
+    def map_updates(self) -> str:
+        """Walls that changed, published by the mapper as they change (rate-limited)."""
+        return f"{self.prefix}/map/updates"
+
+    @property
     def progress(self) -> str:
         """Mapper acknowledgements of the frames of each player run."""
         return f"{self.prefix}/mapper/progress"

@@ -7,6 +7,7 @@ as a process against a router on a free loopback port: the file cannot rot unnot
 from __future__ import annotations
 
 import re
+import struct
 import subprocess
 import sys
 import time
@@ -22,8 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_demo_maps_the_sample_bag_and_draws_it(tmp_path):
-    svg = tmp_path / "demo.svg"
-    out = run_wallmap("demo", "--out", str(svg), cwd=tmp_path)
+    png = tmp_path / "demo.png"
+    out = run_wallmap("demo", "--out", str(png), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "published 245 frames" in out.stdout
     assert re.search(r"\d+ walls from 245 frames", out.stdout)
@@ -32,9 +33,10 @@ def test_demo_maps_the_sample_bag_and_draws_it(tmp_path):
     assert float(score[1]) >= 0.95
     assert float(score[2]) >= 0.9
     assert score[3] == "0"
-    drawing = svg.read_text()
-    assert drawing.startswith("<svg")
-    assert drawing.count("<line") >= 10
+    picture = png.read_bytes()
+    assert picture.startswith(b"\x89PNG\r\n\x1a\n")
+    width, height = struct.unpack(">II", picture[16:24])
+    assert max(width, height) == 1000
 
 
 def test_up_writes_the_map_as_json_and_keeps_state(tmp_path):

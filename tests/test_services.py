@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import pytest
+import zenoh
 
+from wallmap.common.codec import decode
 from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import (
+    Keys,
     TransportError,
     ZenohSettings,
     add_zenoh_arguments,
     make_config,
+    open_session,
     settings_from_args,
 )
 
@@ -100,3 +105,63 @@ def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):
     assert asked.get_json("scouting/multicast/enabled") == "true"
     waiting = make_config(ZenohSettings(wait_for_router=float("inf")))
     assert waiting.get_json("connect/timeout_ms") == "-1"
+
+
+@pytest.mark.e2e
+def test_map_updates_stream_the_walls_as_they_change(stack, small_bag):
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    with open_session(ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)) as session:
+        sub = session.declare_subscriber(
+            Keys(stack.prefix).map_updates, zenoh.handlers.FifoChannel(1000)
+        )
+        assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+        time.sleep(1.0)
+        updates = []
+        while (sample := sub.try_recv()) is not None:
+            updates.append(decode(sample.payload.to_bytes()))
+    assert 1 <= len(updates) <= 60 / 15 / 0.5 + 5  # rate-limited: ~ every 0.5 s while busy
+    latest: dict[int, dict] = {}
+    for update in updates:
+        for wall in update["walls"]:
+            latest[wall["id"]] = wall
+        for gone in update["removed"]:
+            latest.pop(gone, None)
+    final = stack.query("--tentative")
+    assert {w["id"]: w for w in final["walls"]} == latest
+
+
+@pytest.mark.e2e
+def test_query_filters_from_the_command_line(stack, small_bag):
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+    everything = stack.query("--tentative")
+    served = stack.query()
+    assert len(served["walls"]) <= len(everything["walls"])
+    assert all(not w["tentative"] for w in served["walls"])
+    assert stack.query("--bbox", "1000,1000,1001,1001")["walls"] == []
+    assert stack.query("--since", "1e12")["walls"] == []
+    bad = stack.run("query", "--bbox", "1,2", *stack.zenoh_args)
+    assert bad.returncode == 1
+    assert "bbox must be xmin,ymin,xmax,ymax" in bad.stderr
+
+
+@pytest.mark.e2e
+def test_plot_and_export_the_live_map(stack, small_bag, tmp_path):
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+    served = stack.query()["walls"]
+    for name in ("map.png", "map.svg"):
+        out = stack.run("plot", str(tmp_path / name), *stack.zenoh_args)
+        assert out.returncode == 0, out.stderr
+    assert (tmp_path / "map.png").read_bytes().startswith(b"\x89PNG")
+    assert (tmp_path / "map.svg").read_text().count('class="wall"') >= len(served)
+    out = stack.run("export", str(tmp_path / "map.geojson"), *stack.zenoh_args)
+    assert out.returncode == 0, out.stderr
+    collection = json.loads((tmp_path / "map.geojson").read_text())
+    ids = [
+        f["properties"]["id"] for f in collection["features"] if f["properties"]["kind"] == "wall"
+    ]
+    assert sorted(ids) == sorted(w["id"] for w in served)

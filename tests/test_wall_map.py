@@ -9,7 +9,7 @@ from wallmap.common import wall_model
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 
 # A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
 WALLS = [
@@ -73,7 +73,7 @@ def line_error(wall_reply, p0, p1):
 def test_every_wall_is_mapped_once_and_accurately():
     rng = np.random.default_rng(5)
     wall_map = build_map(rng)
-    walls = wall_map.reply(min_obs=3)["walls"]
+    walls = wall_map.reply(MapQuery(min_obs=3))["walls"]
     assert len(walls) == len(WALLS), [w["n_obs"] for w in walls]
     for p0, p1 in WALLS:
         errors = [line_error(w, p0, p1) for w in walls]
@@ -84,7 +84,7 @@ def test_every_wall_is_mapped_once_and_accurately():
 def test_reported_closest_point_and_covariance_are_in_the_map_frame():
     rng = np.random.default_rng(6)
     wall_map = build_map(rng)
-    for w in wall_map.reply(min_obs=3)["walls"]:
+    for w in wall_map.reply(MapQuery(min_obs=3))["walls"]:
         p0, p1 = np.array(w["p0"]), np.array(w["p1"])
         d = (p1 - p0) / np.linalg.norm(p1 - p0)
         foot = p0 - (p0 @ d) * d  # the line's closest point to the origin
@@ -122,7 +122,8 @@ def test_collinear_walls_far_apart_stay_separate():
     )
     ids = wall_map.integrate(Observations("r", 1, 2.0, "base_link", [near]), Pose(2.0, 0, 0, 0))
     assert ids == [0]
-    wall = wall_map.reply()["walls"][0]
+    wall = wall_map.reply(MapQuery(tentative=True))["walls"][0]  # seen once: tentative
+    assert wall["tentative"]
     assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 0.0])
 
 
@@ -132,7 +133,7 @@ def test_state_round_trip_keeps_ids_and_numbers(tmp_path):
     path = tmp_path / "map.json"
     state_file.write(path, state_file.to_json(wall_map))
     again = state_file.load(path, MapperConfig())
-    assert again.reply(trajectory=True) == wall_map.reply(trajectory=True)
+    assert again.reply(MapQuery(trajectory=True)) == wall_map.reply(MapQuery(trajectory=True))
     assert again.next_id == wall_map.next_id
     assert len(again.trajectory) > 20
 
@@ -179,19 +180,23 @@ def test_walls_that_converge_onto_one_line_merge_and_the_older_id_survives(tmp_p
             Observations("r", 0, stamp, "base_link", [obs]), Pose(stamp, 0, 0, 0)
         )
 
-    assert seen(-6.0, -4.0, 1.0) == [0]
-    assert seen(-1.5, 2.0, 2.0) == [1]  # 2.5 m away along the line: another wall, for now
+    assert seen(-6.0, -4.0, 1.0) == seen(-6.0, -4.0, 1.1) == [0]
+    # 2.5 m away along the line: another wall, for now.
+    assert seen(-1.5, 2.0, 2.0) == seen(-1.5, 2.0, 2.1) == [1]
     assert len(wall_map.walls) == 2
     assert seen(-4.5, -1.0, 3.0) == [0]  # the gap is seen: one wall
+    assert seen(-4.5, -1.0, 3.1) == [0]
     assert list(wall_map.walls) == [0]
     assert wall_map.merges == [(1, 0, 3.0)]
-    wall = wall_map.reply()["walls"][0]
+    wall = wall_map.reply(MapQuery(tentative=True))["walls"][0]
     assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 2.0])
-    assert wall["n_obs"] == 3
+    assert wall["n_obs"] == 6
     assert wall_map.reply()["merges"] == [[1, 0, 3.0]]
     path = tmp_path / "map.json"
     state_file.write(path, state_file.to_json(wall_map))
-    assert state_file.load(path, MapperConfig()).merges == [(1, 0, 3.0)]
+    again = state_file.load(path, MapperConfig())
+    assert again.merges == [(1, 0, 3.0)]
+    assert again.reply(MapQuery(tentative=True)) == wall_map.reply(MapQuery(tentative=True))
 
 
 def test_two_faces_of_a_real_wall_stay_apart():
@@ -220,3 +225,87 @@ def test_pose_jumps_are_logged(caplog):
     assert "jumped" not in caplog.text
     buf.add(Pose(1.2, 2.05, 0.0, 0.0))  # 2 m in 0.1 s: a localiser correcting itself
     assert "pose jumped by 2.00 m" in caplog.text
+
+
+def along_wall(x0: float, x1: float, y: float = 2.0) -> WallObservation:
+    """A wall y = 2 seen from the origin between x0 and x1, robot facing +x."""
+    cov = np.eye(2) * 1e-4
+    return WallObservation(np.array([0.0, y]), cov, np.array([x0, y]), np.array([x1, y]), 40, 0.01)
+
+
+def test_a_door_splits_the_extent_into_segments_and_strays_do_not_stretch_it():
+    wall_map = WallMap()
+    for i in range(6):
+        pose = Pose(float(i), 0.1 * i, 0.0, 0.0)  # driving along: distinct views
+        shift = -0.1 * i  # the robot moved: the same wall parts, in its own frame
+        parts = [along_wall(-3.0 + shift, -0.5 + shift), along_wall(0.5 + shift, 3.0 + shift)]
+        wall_map.integrate(Observations("r", i, float(i), "base_link", parts), pose)
+    wall_map.integrate(
+        Observations("r", 9, 9.0, "base_link", [along_wall(2.5, 6.0)]), Pose(9, 0, 0, 0)
+    )
+    (wall,) = wall_map.reply()["walls"]
+    segments = np.array(wall["segments"])[:, :, 0]
+    spans = sorted(np.sort(segments, axis=1).tolist())
+    np.testing.assert_allclose(spans, [[-3.0, -0.5], [0.5, 3.0]], atol=0.05)
+    assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-3.0, 3.0], abs=0.05)
+
+
+def test_walls_are_tentative_until_seen_from_distinct_viewpoints():
+    wall_map = WallMap()
+    for i in range(5):  # five times from the same spot
+        wall_map.integrate(
+            Observations("r", i, float(i), "base_link", [along_wall(-1, 1)]), Pose(i, 0, 0, 0)
+        )
+    assert wall_map.reply()["walls"] == []
+    assert len(wall_map.reply(MapQuery(tentative=True))["walls"]) == 1
+    wall_map.integrate(
+        Observations("r", 5, 5.0, "base_link", [along_wall(-1.5, 0.5)]), Pose(5, 0.5, 0, 0)
+    )
+    (wall,) = wall_map.reply()["walls"]
+    assert (wall["n_views"], wall["tentative"]) == (2, False)
+
+
+def test_query_filters_and_their_errors():
+    wall_map = WallMap()
+    for i in range(4):
+        obs = [along_wall(-1, 1), along_wall(4, 6, y=-3.0)]
+        wall_map.integrate(
+            Observations("r", i, 10.0 + i, "base_link", obs), Pose(10.0 + i, 0.3 * i, 0, 0)
+        )
+    assert len(wall_map.reply()["walls"]) == 2
+    box = MapQuery.from_parameters({"bbox": "-2,1,2,3"})
+    assert [w["v"] for w in wall_map.reply(box)["walls"]] == [pytest.approx(2.0)]
+    assert wall_map.reply(MapQuery.from_parameters({"since": "13.5"}))["walls"] == []
+    assert len(wall_map.reply(MapQuery.from_parameters({"since": "13"}))["walls"]) == 2
+    for params, reason in [
+        ({"bbox": "1,2,3"}, "bbox must be"),
+        ({"bbox": "3,0,1,1"}, "xmin <= xmax"),
+        ({"since": "yesterday"}, "since must be"),
+        ({"tentative": "yes"}, "tentative must be true or false"),
+        ({"colour": "red"}, "unknown parameter 'colour'"),
+    ]:
+        with pytest.raises(ValueError, match=reason):
+            MapQuery.from_parameters(params)
+    changes = wall_map.take_changes()
+    assert len(changes["walls"]) == 2
+    assert wall_map.take_changes()["walls"] == []
+
+
+def test_a_wall_passing_close_to_the_sensor_is_mapped_as_well_as_any_other():
+    # The robot drives 35 cm beside the wall y = 0.35, then moves away to 3 m.
+    rng = np.random.default_rng(11)
+    wall_map = WallMap()
+    for i in range(80):
+        y = 0.0 if i < 40 else -0.07 * (i - 40)
+        pose = np.array([0.05 * i, y, rng.uniform(-0.3, 0.3)])
+        rot = wall_model.rotation(pose[2])
+        z = rot.T @ np.array([0.0, 0.35 - y]) + rng.normal(0, 0.005, 2)
+        ends = [rot.T @ (np.array([x, 0.35]) - pose[:2]) for x in (pose[0] - 1.0, pose[0] + 1.5)]
+        obs = WallObservation(z, np.eye(2) * 0.005**2, ends[0], ends[1], 40, 0.005)
+        wall_map.integrate(
+            Observations("r", i, float(i), "base_link", [obs]), Pose(float(i), *pose)
+        )
+    (wall,) = wall_map.reply()["walls"]
+    assert wall["u"] == pytest.approx(0.0, abs=0.005)
+    assert wall["v"] == pytest.approx(0.35, abs=0.005)
+    assert line_error(wall, (-1.0, 0.35), (5.0, 0.35)) < 0.01

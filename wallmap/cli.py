@@ -27,8 +27,10 @@ from wallmap.common.transport import (
     open_session,
     settings_from_args,
 )
+from wallmap.export import write_geojson
 from wallmap.launcher import UpOptions, demo, up
 from wallmap.map_client import QueryError, fetch_map, format_table, to_json
+from wallmap.plot import write_picture
 from wallmap.services.detector import service as detector_service
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.detector.scan_row import RowSelection
@@ -131,7 +133,13 @@ def _cmd_query(args: argparse.Namespace) -> int:
     settings = settings_from_args(args, wait_for_router=0.0)
     with open_session(settings) as session:
         reply = fetch_map(
-            session, Keys(settings.prefix), min_obs=args.min_obs, timeout=args.timeout
+            session,
+            Keys(settings.prefix),
+            timeout=args.timeout,
+            min_obs=args.min_obs,
+            tentative=args.tentative or None,
+            bbox=args.bbox,
+            since=args.since,
         )
     print(to_json(reply) if args.json else format_table(reply))
     return 0
@@ -148,7 +156,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
         state=args.state,
         exit_when_done=args.exit_when_done,
         json_out=args.json_out,
-        svg_out=args.svg_out,
+        picture=args.picture,
         min_obs=args.min_obs,
         truth=args.truth,
     )
@@ -172,6 +180,31 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     seen = sum(1 for n in info.seen_counts.values() if n >= 3)
     print(f"wrote {info.path}: {info.n_frames} frames, {seen} walls seen in 3 frames or more")
     print(f"ground truth: {info.truth_path}")
+    return 0
+
+
+def _fetch_for_files(args: argparse.Namespace) -> dict[str, object]:
+    settings = settings_from_args(args, wait_for_router=0.0)
+    with open_session(settings) as session:
+        return fetch_map(
+            session,
+            Keys(settings.prefix),
+            timeout=args.timeout,
+            min_obs=args.min_obs,
+            tentative=args.tentative or None,
+            trajectory=True,
+        )
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    write_picture(args.out, _fetch_for_files(args), size=args.size)
+    print(f"picture: {args.out}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    write_geojson(args.out, _fetch_for_files(args))
+    print(f"GeoJSON: {args.out}")
     return 0
 
 
@@ -269,6 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--min-obs", type=int, default=1, metavar="N", help="walls seen at least N times"
     )
+    p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
+    p.add_argument("--bbox", metavar="XMIN,YMIN,XMAX,YMAX", help="walls crossing this box (m)")
+    p.add_argument("--since", type=float, metavar="STAMP", help="walls seen since this stamp")
     p.add_argument("--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper")
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_query)
@@ -278,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--state", type=Path, metavar="FILE", help="the mapper's state file")
     p.add_argument("--exit-when-done", action="store_true", help="stop everything after the bag")
     p.add_argument("--json-out", type=Path, metavar="FILE", help="write the final map as JSON")
-    p.add_argument("--svg-out", type=Path, metavar="FILE", help="draw the final map as SVG")
+    p.add_argument("--picture", type=Path, metavar="FILE", help="draw the final map (.png or .svg)")
     p.add_argument(
         "--min-obs", type=int, default=3, metavar="N", help="walls printed: seen N times"
     )
@@ -287,6 +323,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_up)
+
+    for name, what in (
+        ("plot", "draw the current map (.png or .svg)"),
+        ("export", "the map as GeoJSON"),
+    ):
+        p = sub.add_parser(name, help=what)
+        p.add_argument("out", type=Path, metavar="OUT", help="output file")
+        if name == "plot":
+            p.add_argument("--size", type=int, default=1000, help="longer side in pixels")
+        p.add_argument("--min-obs", type=int, default=1, metavar="N", help="walls seen N times")
+        p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
+        p.add_argument(
+            "--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper"
+        )
+        add_zenoh_arguments(p)
+        p.set_defaults(func=_cmd_plot if name == "plot" else _cmd_export)
 
     p = sub.add_parser("scene", help="write a bag of a generated scene, with its ground truth")
     p.add_argument("out", type=Path, metavar="OUT", help="bag file (ROS 1) or folder (ROS 2)")
@@ -301,7 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_scene)
 
     p = sub.add_parser("demo", help="run the pipeline on the sample bag shipped with wallmap")
-    p.add_argument("--out", type=Path, default=Path("wallmap-demo.svg"), help="picture file")
+    p.add_argument(
+        "--out", type=Path, default=Path("wallmap-demo.png"), help="picture (.png or .svg)"
+    )
     p.set_defaults(func=_cmd_demo)
     return parser
 

@@ -19,14 +19,12 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-import numpy as np
-
 from wallmap.common.evaluation import evaluate_map
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import fetch_map, format_table, to_json
-from wallmap.picture import write_svg
+from wallmap.plot import write_picture
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
 
@@ -43,7 +41,7 @@ class UpOptions:
     state: Path | None = None
     exit_when_done: bool = False
     json_out: Path | None = None
-    svg_out: Path | None = None
+    picture: Path | None = None
     min_obs: int = 3
     truth: Path | None = None
 
@@ -104,18 +102,18 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
         if player.returncode != 0:
             return player.returncode
         with open_session(settings) as session:
-            reply = fetch_map(session, Keys(settings.prefix), min_obs=options.min_obs)
-            trajectory = fetch_map(session, Keys(settings.prefix), trajectory=True)["trajectory"]
+            reply = fetch_map(
+                session, Keys(settings.prefix), min_obs=options.min_obs, trajectory=True
+            )
         print(format_table(reply))
         if options.truth:
             plan, _, seen = load_truth(options.truth)
             print(f"against the ground truth: {evaluate_map(reply['walls'], plan, seen).summary()}")
         if options.json_out:
             options.json_out.write_text(to_json(reply), encoding="utf-8")
-        if options.svg_out:
-            path = np.array([p[1:3] for p in trajectory]).reshape(-1, 2)
-            write_svg(options.svg_out, reply["walls"], path)
-            print(f"picture: {options.svg_out}")
+        if options.picture:
+            write_picture(options.picture, reply)
+            print(f"picture: {options.picture}")
         if not options.exit_when_done:
             print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
             stop.wait()
@@ -132,5 +130,5 @@ def demo(out: Path) -> int:
     settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",))
     bag = sample_bag()
     truth = bag.with_name(bag.name + ".truth.json")
-    options = UpOptions(bag=bag, fast=True, exit_when_done=True, svg_out=out, truth=truth)
+    options = UpOptions(bag=bag, fast=True, exit_when_done=True, picture=out, truth=truth)
     return up(settings, options)

@@ -16,15 +16,19 @@ class QueryError(RuntimeError):
 
 
 def fetch_map(
-    session: zenoh.Session,
-    keys: Keys,
-    *,
-    min_obs: int = 1,
-    trajectory: bool = False,
-    timeout: float = 5.0,
+    session: zenoh.Session, keys: Keys, *, timeout: float = 5.0, **parameters: object
 ) -> dict[str, Any]:
-    """Query ``{prefix}/map/walls`` and return the decoded reply."""
-    selector = f"{keys.map_walls}?min_obs={min_obs}" + (";trajectory=true" if trajectory else "")
+    """Query ``{prefix}/map/walls`` with selector parameters and return the decoded reply.
+
+    Parameters are the mapper's (``min_obs``, ``tentative``, ``bbox``, ``since``,
+    ``trajectory``); None leaves one out, booleans become true/false.
+    """
+    pairs = [
+        f"{name}={str(value).lower() if isinstance(value, bool) else value}"
+        for name, value in parameters.items()
+        if value is not None
+    ]
+    selector = keys.map_walls + ("?" + ";".join(pairs) if pairs else "")
     for reply in session.get(selector, timeout=timeout):
         if reply.ok is None:
             msg = f"the mapper refused the query: {reply.err.payload.to_string()}"

@@ -10,7 +10,7 @@ from typing import Any
 
 from wallmap.common.messages import Frame
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 from wallmap.services.player.bag_source import BagSource
 
 
@@ -36,6 +36,6 @@ def map_bag(
     return wall_map
 
 
-def walls(wall_map: WallMap, min_obs: int = 3) -> list[dict[str, Any]]:
-    """The served walls, as the map reply has them."""
-    return wall_map.reply(min_obs=min_obs)["walls"]
+def walls(wall_map: WallMap, min_obs: int = 1) -> list[dict[str, Any]]:
+    """The served (confirmed) walls, as the map reply has them."""
+    return wall_map.reply(MapQuery(min_obs=min_obs))["walls"]

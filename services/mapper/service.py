@@ -26,12 +26,13 @@ from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 
 QUEUE_DEPTH = 64
 MAX_PENDING = 512
 MAX_RUNS = 16
 ACK_EVERY = 8  # frames between acknowledgements while busy
+UPDATE_PERIOD = 0.5  # s between map updates while busy
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 
 
@@ -83,10 +84,10 @@ class MapperCore:
             self.runs.popitem(last=False)
         return new
 
-    def reply(self, min_obs: int, *, trajectory: bool) -> dict[str, object]:
+    def reply(self, query: MapQuery) -> dict[str, object]:
         """The map reply plus the mapper's counters."""
         with self.lock:
-            body = self.map.reply(min_obs=min_obs, trajectory=trajectory)
+            body = self.map.reply(query)
             counts = self.stats.snapshot()
         body["dropped"] = counts.get("dropped", 0)
         body["dropped_reasons"] = {
@@ -110,6 +111,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings) as session:
         progress = session.declare_publisher(keys.progress)
+        updates = session.declare_publisher(keys.map_updates)
         pose_sub = session.declare_subscriber(pose_key, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
         obs_sub = session.declare_subscriber(
             keys.observations, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
@@ -123,6 +125,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
                 daemon=True,
             ),
             threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
+            threading.Thread(target=_updates, args=(core, updates, stop), daemon=True),
         ]
         for worker in workers:
             worker.start()
@@ -202,6 +205,16 @@ def _flush(acks: dict[str, Progress], progress: zenoh.Publisher) -> None:
     acks.clear()
 
 
+def _updates(core: MapperCore, updates: zenoh.Publisher, stop: threading.Event) -> None:
+    """Publish the walls that changed, at most every UPDATE_PERIOD seconds."""
+    while not stop.wait(UPDATE_PERIOD):
+        with core.lock:
+            if not core.map.changed and not core.map.removed:
+                continue
+            changes = core.map.take_changes()
+        updates.put(encode(changes))
+
+
 def _process_head(
     pending: collections.deque[tuple[float, Observations]],
     core: MapperCore,
@@ -244,15 +257,15 @@ def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> 
         with query:
             params = query.parameters
             try:
-                min_obs = int(params.get("min_obs") or 1)
-            except ValueError:
-                query.reply_err(f"min_obs must be an integer, got {params.get('min_obs')!r}")
+                selection = MapQuery.from_parameters(dict(params))
+            except ValueError as err:
+                query.reply_err(str(err))
                 continue
             fmt = params.get("format") or "msgpack"
             if fmt not in ("msgpack", "json"):
                 query.reply_err(f"format must be msgpack or json, got {fmt!r}")
                 continue
-            body = core.reply(min_obs, trajectory=params.get("trajectory") == "true")
+            body = core.reply(selection)
             if fmt == "json":
                 payload = json.dumps({"v": 1, **body}).encode()
                 query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)

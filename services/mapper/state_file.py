@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.wall_map import MapperConfig, Wall, WallMap
 
 STATE_VERSION = 1
@@ -41,7 +42,10 @@ def to_json(wall_map: WallMap) -> dict[str, Any]:
                 "p": w.p.tolist(),
                 "anchor": w.anchor.tolist(),
                 "ends": w.ends.tolist(),
+                "extent": w.extent.to_json(),
                 "n_obs": w.n_obs,
+                "views": w.views,
+                "last_view": w.last_view.tolist(),
                 "first_seen": w.first_seen,
                 "last_seen": w.last_seen,
             }
@@ -71,9 +75,12 @@ def from_json(data: dict[str, Any], config: MapperConfig) -> WallMap:
             p=np.array(w["p"], dtype=float).reshape(2, 2),
             anchor=np.array(w["anchor"], dtype=float).reshape(2),
             ends=np.array(w["ends"], dtype=float).reshape(2, 2),
+            extent=Extent.from_json(w["extent"]),
             n_obs=int(w["n_obs"]),
             first_seen=float(w["first_seen"]),
             last_seen=float(w["last_seen"]),
+            views=int(w["views"]),
+            last_view=np.array(w["last_view"], dtype=float).reshape(3),
         )
         if not all(np.isfinite(a).all() for a in (wall.s, wall.p, wall.anchor, wall.ends)):
             msg = f"wall {wall.id} holds non-finite numbers"

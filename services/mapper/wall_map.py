@@ -9,6 +9,7 @@ same wall.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,6 +18,7 @@ from numpy.typing import NDArray
 
 from wallmap.common import ekf, wall_model
 from wallmap.common.messages import Observations, Pose, WallObservation
+from wallmap.services.mapper.extent import Extent
 
 Array = NDArray[np.float64]
 
@@ -38,8 +40,11 @@ class MapperConfig:
         merge_angle: two walls whose lines differ by less than this angle (rad)...
         merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
             they merge, and the older id survives. 5 cm keeps the two faces of a real wall apart.
+        confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
+        confirm_views: ...from this many distinct viewpoints (moved ``view_distance`` or turned
+            ``view_angle`` since the last one): one glimpse, however long, is not a wall.
         keyframe_distance: the trajectory kept with the map has a pose every this far (m)...
-        keyframe_angle: ...or every this much turn (rad).
+        keyframe_angle: ...or every this much turn (rad); also the distinct-view thresholds.
     """
 
     gate: float = ekf.CHI2_2DOF_999
@@ -47,46 +52,149 @@ class MapperConfig:
     pose_cov: Array = field(default_factory=_default_pose_cov)
     merge_angle: float = np.radians(2.0)
     merge_offset: float = 0.05
+    confirm_obs: int = 3
+    confirm_views: int = 2
     keyframe_distance: float = 0.1
     keyframe_angle: float = np.radians(5.0)
 
 
+@dataclass(frozen=True)
+class MapQuery:
+    """Which walls a reply holds: the selector parameters of ``{prefix}/map/walls``.
+
+    Attributes:
+        min_obs: walls seen at least this many times.
+        tentative: also walls not yet confirmed (possible phantoms).
+        bbox: (xmin, ymin, xmax, ymax): walls whose extent crosses this box.
+        since: walls seen at or after this stamp.
+        trajectory: add the keyframe trajectory.
+    """
+
+    min_obs: int = 1
+    tentative: bool = False
+    bbox: tuple[float, float, float, float] | None = None
+    since: float | None = None
+    trajectory: bool = False
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, str]) -> MapQuery:
+        """Parse selector parameters; ValueError says which one is wrong and why."""
+        unknown = set(params) - {"min_obs", "tentative", "bbox", "since", "trajectory", "format"}
+        if unknown:
+            msg = f"unknown parameter {sorted(unknown)[0]!r}"
+            raise ValueError(msg)
+        try:
+            min_obs = int(params.get("min_obs") or 1)
+        except ValueError:
+            msg = f"min_obs must be an integer, got {params.get('min_obs')!r}"
+            raise ValueError(msg) from None
+        bbox = None
+        if params.get("bbox"):
+            try:
+                xmin, ymin, xmax, ymax = (float(v) for v in params["bbox"].split(","))
+            except ValueError:
+                msg = f"bbox must be xmin,ymin,xmax,ymax in metres, got {params['bbox']!r}"
+                raise ValueError(msg) from None
+            if not (xmin <= xmax and ymin <= ymax):
+                msg = f"bbox must have xmin <= xmax and ymin <= ymax, got {params['bbox']!r}"
+                raise ValueError(msg)
+            bbox = (xmin, ymin, xmax, ymax)
+        since = None
+        if params.get("since"):
+            try:
+                since = float(params["since"])
+            except ValueError:
+                msg = f"since must be a stamp in seconds, got {params['since']!r}"
+                raise ValueError(msg) from None
+        flags = {}
+        for name in ("tentative", "trajectory"):
+            value = params.get(name, "false")
+            if value not in ("true", "false"):
+                msg = f"{name} must be true or false, got {value!r}"
+                raise ValueError(msg)
+            flags[name] = value == "true"
+        return cls(min_obs, flags["tentative"], bbox, since, flags["trajectory"])
+
+
+def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
+    """Whether pose ``b`` is a new viewpoint after ``a``."""
+    turn = abs(np.remainder(b[2] - a[2] + np.pi, 2 * np.pi) - np.pi)
+    return bool(np.hypot(*(b[:2] - a[:2])) >= distance or turn >= angle)
+
+
+def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
+    """Whether segment p0-p1 meets the box (Liang-Barsky clipping)."""
+    lo, hi = np.array(box[:2]), np.array(box[2:])
+    start, end, d = 0.0, 1.0, p1 - p0
+    for axis in (0, 1):
+        if abs(d[axis]) < 1e-12:
+            if not lo[axis] <= p0[axis] <= hi[axis]:
+                return False
+            continue
+        t0, t1 = sorted(((lo[axis] - p0[axis]) / d[axis], (hi[axis] - p0[axis]) / d[axis]))
+        start, end = max(start, t0), min(end, t1)
+    return start <= end
+
+
 @dataclass
 class Wall:
-    """One mapped wall: its EKF state (anchored closest point), covariance and extent."""
+    """One mapped wall: its EKF state (anchored closest point), covariance and extent.
+
+    ``ends`` is the union of everything observed (it decides which walls an observation may
+    join); ``extent`` counts observations along the wall and gives the served segments.
+    """
 
     id: int
     s: Array
     p: Array
     anchor: Array
-    ends: Array  # 2x2, the extent's end points in the map frame, on the line
+    ends: Array  # 2x2, map frame, on the line
+    extent: Extent
     n_obs: int
     first_seen: float
     last_seen: float
+    views: int
+    last_view: Array  # (x, y, yaw) of the last distinct viewpoint
 
     def along(self, points: Array) -> Array:
         """Positions of map points along the wall, from its foot point."""
         return (points - wall_model.foot(self.s, self.anchor)) @ wall_model.direction(self.s)
 
-    def extend(self, points: Array) -> None:
-        """Grow the extent to cover ``points`` (their projections onto the current line)."""
-        t = self.along(np.vstack([self.ends, points]))
+    def on_line(self, t: Array) -> Array:
+        """Map points at positions ``t`` along the wall."""
         foot, d = wall_model.foot(self.s, self.anchor), wall_model.direction(self.s)
-        self.ends = np.array([foot + t.min() * d, foot + t.max() * d])
+        return foot + np.outer(t, d)
 
-    def to_reply(self) -> dict[str, Any]:
-        """The contract's wall record, in the map frame."""
+    def extend(self, points: Array) -> None:
+        """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
+        t = self.along(np.vstack([self.ends, points]))
+        self.ends = self.on_line(np.array([t.min(), t.max()]))
+
+    def segments(self) -> Array:
+        """The served segments (k x 2 x 2), from the extent counts, on the current line."""
+        intervals = self.extent.intervals()
+        axis = self.extent.origin + np.outer(np.ravel(intervals), self.extent.direction)
+        return self.on_line(self.along(axis)).reshape(-1, 2, 2)
+
+    def confirmed(self, config: MapperConfig) -> bool:
+        """Seen often enough, from enough viewpoints, to be served as a wall."""
+        return self.n_obs >= config.confirm_obs and self.views >= config.confirm_views
+
+    def to_reply(self, config: MapperConfig) -> dict[str, Any]:
+        """The contract's wall record, in the map frame, with its segments."""
         uv, jac = wall_model.to_map_frame(self.s, self.anchor)
-        t = self.along(self.ends)
-        foot, d = wall_model.foot(self.s, self.anchor), wall_model.direction(self.s)
+        segments = self.segments()
         return {
             "id": self.id,
             "u": float(uv[0]),
             "v": float(uv[1]),
             "cov": (jac @ self.p @ jac.T).tolist(),
-            "p0": (foot + t.min() * d).tolist(),
-            "p1": (foot + t.max() * d).tolist(),
+            "p0": segments[0, 0].tolist(),
+            "p1": segments[-1, 1].tolist(),
+            "segments": segments.tolist(),
             "n_obs": self.n_obs,
+            "n_views": self.views,
+            "tentative": not self.confirmed(config),
             "first_seen": self.first_seen,
             "last_seen": self.last_seen,
         }
@@ -104,6 +212,8 @@ class WallMap:
         self.stamp: float | None = None
         self.trajectory: list[tuple[float, float, float, float]] = []  # stamp, x, y, yaw
         self.merges: list[tuple[int, int, float]] = []  # (merged id, surviving id, stamp)
+        self.changed: set[int] = set()  # since the last take_changes()
+        self.removed: set[int] = set()
 
     def integrate(self, frame: Observations, pose: Pose) -> list[int]:
         """Fold one frame's observations in; returns the wall id each observation went to."""
@@ -117,13 +227,10 @@ class WallMap:
         return ids
 
     def _keep_keyframe(self, pose: Pose) -> None:
-        if self.trajectory:
-            _, x, y, yaw = self.trajectory[-1]
-            moved = np.hypot(pose.x - x, pose.y - y) >= self.config.keyframe_distance
-            turned = abs(np.remainder(pose.yaw - yaw + np.pi, 2 * np.pi) - np.pi)
-            if not moved and turned < self.config.keyframe_angle:
-                return
-        self.trajectory.append((pose.stamp, pose.x, pose.y, pose.yaw))
+        last = np.array(self.trajectory[-1][1:]) if self.trajectory else None
+        cfg = self.config
+        if last is None or _moved(last, pose.vector, cfg.keyframe_distance, cfg.keyframe_angle):
+            self.trajectory.append((pose.stamp, pose.x, pose.y, pose.yaw))
 
     def _integrate_one(
         self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float
@@ -144,8 +251,14 @@ class WallMap:
         _, wall, innov = best
         wall.s, wall.p = ekf.update(wall.s, wall.p, innov)
         wall.extend(seg)
+        wall.extent.add(seg)
         wall.n_obs += 1
         wall.last_seen = max(wall.last_seen, stamp)
+        cfg = self.config
+        if _moved(wall.last_view, pose, cfg.keyframe_distance, cfg.keyframe_angle):
+            wall.views += 1
+            wall.last_view = pose.copy()
+        self.changed.add(wall.id)
         return self._merge_duplicates(wall, stamp).id
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
@@ -155,11 +268,16 @@ class WallMap:
                 keep, gone = (wall, other) if wall.id < other.id else (other, wall)
                 keep.s, keep.p = ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor)
                 keep.extend(gone.ends)
+                keep.extent.absorb(gone.extent)
                 keep.n_obs += gone.n_obs
+                keep.views += gone.views
                 keep.first_seen = min(keep.first_seen, gone.first_seen)
                 keep.last_seen = max(keep.last_seen, gone.last_seen)
                 del self.walls[gone.id]
                 self.merges.append((gone.id, keep.id, stamp))
+                self.changed.discard(gone.id)
+                self.removed.add(gone.id)
+                self.changed.add(keep.id)
                 wall = keep
         return wall
 
@@ -170,7 +288,7 @@ class WallMap:
             return False
         ta, tb = a.along(a.ends), a.along(b.ends)
         middle = 0.5 * (max(ta.min(), tb.min()) + min(ta.max(), tb.max()))
-        point = wall_model.foot(a.s, a.anchor) + middle * wall_model.direction(a.s)
+        point = a.on_line(np.array([middle]))[0]
         offset = abs(float(nb @ (point - wall_model.foot(b.s, b.anchor))))
         return offset <= self.config.merge_offset
 
@@ -189,22 +307,43 @@ class WallMap:
         self, obs: WallObservation, pose: Array, pose_cov: Array, seg: Array, stamp: float
     ) -> int:
         s, p, anchor = ekf.initial_state(obs.closest, obs.cov, pose, pose_cov)
-        wall = Wall(self.next_id, s, p, anchor, seg.copy(), 1, stamp, stamp)
+        extent = Extent(anchor + s, wall_model.direction(s))
+        wall = Wall(self.next_id, s, p, anchor, seg.copy(), extent, 1, stamp, stamp, 1, pose.copy())
         wall.extend(seg)  # puts the end points on the line
+        extent.add(seg)
         self.walls[wall.id] = wall
+        self.changed.add(wall.id)
         self.next_id += 1
         return wall.id
 
-    def reply(self, *, min_obs: int = 1, trajectory: bool = False) -> dict[str, Any]:
+    def _selected(self, wall: Wall, query: MapQuery) -> bool:
+        if wall.n_obs < query.min_obs or (not query.tentative and not wall.confirmed(self.config)):
+            return False
+        if query.since is not None and wall.last_seen < query.since:
+            return False
+        return query.bbox is None or any(_crosses_box(a, b, query.bbox) for a, b in wall.segments())
+
+    def reply(self, query: MapQuery | None = None) -> dict[str, Any]:
         """The contract's map reply (without the schema version, which the codec adds)."""
+        query = query or MapQuery()
         body: dict[str, Any] = {
             "frame": "map",
             "frames": self.frames,
             "observations": self.observations,
             "stamp": self.stamp,
-            "walls": [w.to_reply() for w in self.walls.values() if w.n_obs >= min_obs],
+            "walls": [
+                w.to_reply(self.config) for w in self.walls.values() if self._selected(w, query)
+            ],
             "merges": [list(m) for m in self.merges],
         }
-        if trajectory:
+        if query.trajectory:
             body["trajectory"] = [list(p) for p in self.trajectory]
         return body
+
+    def take_changes(self) -> dict[str, Any]:
+        """Walls changed and ids removed since the last call: the body of a map update."""
+        walls = [self.walls[i].to_reply(self.config) for i in sorted(self.changed)]
+        removed = sorted(self.removed)
+        self.changed.clear()
+        self.removed.clear()
+        return {"frames": self.frames, "stamp": self.stamp, "walls": walls, "removed": removed}

@@ -1,0 +1,552 @@
+"""Pictures of a map reply, top-down in the map frame, as PNG or SVG, without a plotting library.
+
+``render_map`` lays the picture out once, in pixels, as a list of primitives (filled polygons,
+strokes, dots, labels); the PNG and SVG writers only paint those, so both show the same thing:
+each wall (its segments, thin lines over the gaps between them), its 2-sigma band, its id, the
+trajectory with a dot at its start, a scale bar and (SVG only) a title with the counts.
+
+The PNG rasteriser fills polygons by scanlines: every shape, a thick line included, is a polygon,
+so one vectorised pass per layer paints all of them. There is no anti-aliasing.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import escape, quoteattr
+
+import numpy as np
+
+Array = np.ndarray
+
+BAND_SIGMAS = 2.0
+BAND_CAP = 1.0  # m: the widest band drawn; a line near the origin has an unbounded one
+MARGIN = 40  # px around the drawing
+TITLE_HEIGHT = 24  # px above it, for the title line
+WORLD_PAD = 0.2  # m around the content
+
+BACKGROUND = "#ffffff"
+WALL_COLOUR = "#b3261e"
+BAND_OPACITY = 0.22
+GAP_COLOUR = "#d9908a"
+TRAJECTORY_COLOUR = "#2b6cb0"
+LABEL_COLOUR = "#202020"
+SCALE_COLOUR = "#000000"
+
+_PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # +90 degrees
+
+
+@dataclass(frozen=True)
+class Fill:
+    """A filled polygon, in pixels."""
+
+    points: Array  # (K, 2)
+    colour: str
+    opacity: float
+    kind: str  # the SVG class
+
+
+@dataclass(frozen=True)
+class Stroke:
+    """A polyline of a given width, in pixels."""
+
+    points: Array  # (N, 2), N >= 2
+    width: float
+    colour: str
+    kind: str
+
+
+@dataclass(frozen=True)
+class Dot:
+    """A filled disc, in pixels."""
+
+    centre: tuple[float, float]
+    radius: float
+    colour: str
+    kind: str
+
+
+@dataclass(frozen=True)
+class Label:
+    """Text centred on a point, in pixels; ``height`` is the glyph height."""
+
+    centre: tuple[float, float]
+    text: str
+    height: float
+    colour: str
+    kind: str
+
+
+Item = Fill | Stroke | Dot | Label
+
+
+@dataclass
+class Drawing:
+    """A laid-out picture: primitives in painting order, plus the map-to-pixel transform."""
+
+    width: int
+    height: int
+    scale: float  # px per m
+    offset: tuple[float, float]  # pixel of the map origin
+    title: str
+    items: list[Item] = field(default_factory=list)
+
+    def to_px(self, points: Array) -> Array:
+        """Map-frame points (..., 2) to pixel coordinates (x right, y down)."""
+        points = np.asarray(points, dtype=float)
+        return np.stack(
+            [
+                self.offset[0] + points[..., 0] * self.scale,
+                self.offset[1] - points[..., 1] * self.scale,
+            ],
+            axis=-1,
+        )
+
+    def to_svg(self) -> str:
+        """The picture as an SVG document."""
+        return _svg(self)
+
+    def to_png(self) -> bytes:
+        """The picture as an RGB PNG file."""
+        return encode_png(rasterise(self))
+
+
+# --- the band ---------------------------------------------------------------------------------
+
+
+def line_sigma(u: float, v: float, cov: Array, points: Array, normal: Array | None = None) -> Array:
+    """Perpendicular standard deviation of the wall's line at ``points`` (on or near the line).
+
+    The line has closest point (u, v) to the origin: r = |(u, v)|, normal n = (u, v) / r and
+    direction d = n turned by +90 degrees. A perturbation delta of (u, v) shifts the line along n
+    by n . delta and turns it by (d . delta) / r about (u, v), so the point at position t along d
+    moves along n by (n - (t / r) d) . delta = g . delta, whose variance is g' cov g.
+
+    For r near 0 the turn is unbounded (as is the (u, v) covariance the mapper serves there): r
+    is floored, so away from the foot point the result is huge but finite, for the caller to cap.
+    ``normal`` gives the line's normal when r is 0, where (u, v) has no direction.
+    """
+    uv = np.array([u, v], dtype=float)
+    r = float(np.hypot(u, v))
+    if r > 1e-9 or normal is None:
+        n = uv / r if r > 1e-9 else np.array([1.0, 0.0])
+    else:
+        n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    d = _PERP @ n
+    t = (np.asarray(points, dtype=float) - r * n) @ d
+    g = n[None, :] - (t / max(r, 1e-9))[:, None] * d[None, :]
+    cov = np.asarray(cov, dtype=float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        var = np.einsum("ij,jk,ik->i", g, cov, g)
+    return np.sqrt(np.clip(var, 0.0, None))
+
+
+def band_half_width(
+    u: float,
+    v: float,
+    cov: Array,
+    points: Array,
+    normal: Array | None = None,
+    *,
+    sigmas: float = BAND_SIGMAS,
+    cap: float = BAND_CAP,
+) -> Array:
+    """Half-width of the wall's ``sigmas``-sigma band at ``points``, at most ``cap`` metres."""
+    half = sigmas * line_sigma(u, v, cov, points, normal)
+    return np.where(np.isfinite(half), np.minimum(half, cap), cap)
+
+
+# --- layout -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Wall:
+    """A wall's geometry in the map frame, as drawn."""
+
+    id: Any
+    pieces: list[Array]  # (2, 2) segments, ordered along the wall
+    gaps: list[Array]  # (2, 2) spans between consecutive pieces
+    normal: Array  # unit, away from the map origin when the line is off it
+    bands: list[Array]  # (2K, 2) polygons
+
+
+def _wall_geometry(wall: dict[str, Any]) -> _Wall:
+    p0, p1 = np.asarray(wall["p0"], dtype=float), np.asarray(wall["p1"], dtype=float)
+    along = p1 - p0
+    if np.linalg.norm(along) < 1e-12:
+        along = np.array([1.0, 0.0])
+    along = along / np.linalg.norm(along)
+    u, v = float(wall["u"]), float(wall["v"])
+    r = math.hypot(u, v)
+    normal = np.array([u, v]) / r if r > 1e-9 else _PERP.T @ along
+    raw = wall.get("segments") or [[wall["p0"], wall["p1"]]]
+    pieces = []
+    for seg in raw:
+        a, b = np.asarray(seg, dtype=float)
+        pieces.append(np.array([a, b]) if (b - a) @ along >= 0 else np.array([b, a]))
+    pieces.sort(key=lambda s: float(s[0] @ along))
+    gaps = [
+        np.array([prev[1], nxt[0]])
+        for prev, nxt in itertools.pairwise(pieces)
+        if (nxt[0] - prev[1]) @ along > 1e-9
+    ]
+    bands = []
+    for a, b in pieces:
+        pts = a + np.linspace(0.0, 1.0, 5)[:, None] * (b - a)  # the band bulges between ends
+        half = band_half_width(u, v, wall["cov"], pts, normal)[:, None]
+        bands.append(np.vstack([pts + half * normal, (pts - half * normal)[::-1]]))
+    return _Wall(wall["id"], pieces, gaps, normal, bands)
+
+
+def _trajectory_xy(reply: dict[str, Any], trajectory: Array | None) -> Array:
+    if trajectory is None:
+        rows = reply.get("trajectory") or []
+        return np.array([row[1:3] for row in rows], dtype=float).reshape(-1, 2)
+    trajectory = np.asarray(trajectory, dtype=float)
+    if trajectory.ndim != 2 or trajectory.shape[1] not in (2, 4):
+        raise ValueError("trajectory: expected (N, 2) x, y or (N, 4) stamp, x, y, yaw rows")
+    return trajectory[:, -3:-1] if trajectory.shape[1] == 4 else trajectory
+
+
+def _scale_bar_length(scale: float, width: int) -> float:
+    """1 m, unless that is under 40 px or over a third of the picture: then 1, 2 or 5 x 10^k m."""
+    if 40 <= scale <= width / 3:
+        return 1.0
+    exponent = math.floor(math.log10(40 / scale))  # 10^(exponent + 1) m is >= 40 px
+    nice = [m * 10.0**k for k in (exponent, exponent + 1) for m in (1.0, 2.0, 5.0)]
+    return min(length for length in nice if length * scale >= 40)
+
+
+def render_map(
+    reply: dict[str, Any], *, trajectory: Array | None = None, size: int = 1000
+) -> Drawing:
+    """Lay out a map reply as a picture whose longer side is about ``size`` pixels.
+
+    Args:
+        reply: the map reply (``walls``, and ``frames``/``observations`` for the title).
+        trajectory: (N, 2) x, y or (N, 4) stamp, x, y, yaw in the map frame; by default the
+            reply's own ``trajectory``, if it has one.
+        size: pixels of the longer side; line widths and text scale with it.
+    """
+    walls = [_wall_geometry(w) for w in reply.get("walls", [])]
+    path = _trajectory_xy(reply, trajectory)
+    content = [path, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
+    everything = np.vstack([c.reshape(-1, 2) for c in content])
+    if len(everything) == 0:
+        everything = np.array([[-1.0, -1.0], [1.0, 1.0]])
+    lo, hi = everything.min(axis=0) - WORLD_PAD, everything.max(axis=0) + WORLD_PAD
+    span = np.maximum(hi - lo, 1e-6)
+    scale = min((size - 2 * MARGIN) / span[0], (size - 2 * MARGIN - TITLE_HEIGHT) / span[1])
+    minimum = max(size // 3, 2 * MARGIN + 1)  # room for the title and the scale bar
+    width = max(math.ceil(span[0] * scale) + 2 * MARGIN, minimum)
+    height = max(math.ceil(span[1] * scale) + 2 * MARGIN + TITLE_HEIGHT, minimum)
+    inner_x = (width - span[0] * scale) / 2
+    inner_y = TITLE_HEIGHT + (height - TITLE_HEIGHT - span[1] * scale) / 2
+    offset = (inner_x - lo[0] * scale, inner_y + hi[1] * scale)
+
+    counts = [f"{len(walls)} walls"]
+    counts += [f"{reply[key]} {key}" for key in ("frames", "observations") if key in reply]
+    title = ", ".join(counts)
+    drawing = Drawing(width, height, scale, offset, title)
+    unit = size / 1000  # line widths and text grow with the picture
+    items = drawing.items
+    px = drawing.to_px
+    for w in walls:
+        items.extend(Fill(px(b), WALL_COLOUR, BAND_OPACITY, "band") for b in w.bands)
+    for w in walls:
+        items.extend(Stroke(px(g), max(1.0, 1.2 * unit), GAP_COLOUR, "gap") for g in w.gaps)
+    if len(path) > 1:
+        items.append(Stroke(px(path), max(1.2, 1.5 * unit), TRAJECTORY_COLOUR, "trajectory"))
+    if len(path) > 0:
+        start = px(path[0])
+        items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), TRAJECTORY_COLOUR, "start"))
+    for w in walls:
+        items.extend(Stroke(px(p), max(2.0, 3 * unit), WALL_COLOUR, "wall") for p in w.pieces)
+    glyph = max(5.0, 5 * round(2 * unit))  # whole bitmap-font pixels in the PNG
+    for w in walls:
+        ends = np.array([w.pieces[0][0], w.pieces[-1][1]])
+        middle = px(ends.mean(axis=0))
+        side = np.array([w.normal[0], -w.normal[1]])  # pixel y points down
+        centre = middle + side * (glyph + 3 * unit)
+        items.append(Label((centre[0], centre[1]), str(w.id), glyph, LABEL_COLOUR, "label"))
+
+    length = _scale_bar_length(scale, width)
+    x0, y = MARGIN, height - MARGIN / 2
+    x1 = x0 + length * scale
+    items.append(Stroke(np.array([[x0, y], [x1, y]]), max(2.0, 2 * unit), SCALE_COLOUR, "scale"))
+    text = f"{length:g} m"
+    items.append(
+        Label((x1 + 6 + 0.8 * glyph * len(text) / 2, y), text, glyph, SCALE_COLOUR, "scale")
+    )
+    return drawing
+
+
+# --- SVG --------------------------------------------------------------------------------------
+
+
+def _svg_points(points: Array) -> str:
+    return " ".join(f"{x:.1f},{y:.1f}" for x, y in points)
+
+
+def _svg(drawing: Drawing) -> str:
+    w, h = drawing.width, drawing.height
+    out = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
+        f'viewBox="0 0 {w} {h}" font-family="sans-serif">',
+        f'<rect width="{w}" height="{h}" fill="{BACKGROUND}"/>',
+        f'<text class="title" x="{MARGIN}" y="{TITLE_HEIGHT - 4}" font-size="14">'
+        f"{escape(drawing.title)}</text>",
+    ]
+    for item in drawing.items:
+        kind = quoteattr(item.kind)
+        if isinstance(item, Fill):
+            out.append(
+                f'<polygon class={kind} points="{_svg_points(item.points)}" fill="{item.colour}" '
+                f'fill-opacity="{item.opacity}" stroke="none"/>'
+            )
+        elif isinstance(item, Stroke) and len(item.points) == 2:
+            (x0, y0), (x1, y1) = item.points
+            out.append(
+                f'<line class={kind} x1="{x0:.1f}" y1="{y0:.1f}" x2="{x1:.1f}" y2="{y1:.1f}" '
+                f'stroke="{item.colour}" stroke-width="{item.width:.2f}" stroke-linecap="square"/>'
+            )
+        elif isinstance(item, Stroke):
+            out.append(
+                f'<polyline class={kind} points="{_svg_points(item.points)}" fill="none" '
+                f'stroke="{item.colour}" stroke-width="{item.width:.2f}" stroke-linejoin="round"/>'
+            )
+        elif isinstance(item, Dot):
+            x, y = item.centre
+            out.append(
+                f'<circle class={kind} cx="{x:.1f}" cy="{y:.1f}" r="{item.radius:.1f}" '
+                f'fill="{item.colour}"/>'
+            )
+        else:
+            x, y = item.centre
+            out.append(
+                f'<text class={kind} x="{x:.1f}" y="{y:.1f}" font-size="{item.height * 1.4:.1f}" '
+                f'text-anchor="middle" dominant-baseline="central" fill="{item.colour}" '
+                f'stroke="{BACKGROUND}" stroke-width="3" paint-order="stroke">'
+                f"{escape(item.text)}</text>"
+            )
+    out.append("</svg>")
+    return "\n".join(out) + "\n"
+
+
+# --- PNG --------------------------------------------------------------------------------------
+
+# 3x5 (m: 5x5) bitmap glyphs for ids and the scale bar; other characters draw as blanks.
+_FONT_ROWS = {
+    "0": ("###", "#.#", "#.#", "#.#", "###"),
+    "1": (".#.", "##.", ".#.", ".#.", "###"),
+    "2": ("###", "..#", "###", "#..", "###"),
+    "3": ("###", "..#", ".##", "..#", "###"),
+    "4": ("#.#", "#.#", "###", "..#", "..#"),
+    "5": ("###", "#..", "###", "..#", "###"),
+    "6": ("###", "#..", "###", "#.#", "###"),
+    "7": ("###", "..#", "..#", ".#.", ".#."),
+    "8": ("###", "#.#", "###", "#.#", "###"),
+    "9": ("###", "#.#", "###", "..#", "###"),
+    "-": ("...", "...", "###", "...", "..."),
+    ".": (".", ".", ".", ".", "#"),
+    "m": (".....", ".....", "####.", "#.#.#", "#.#.#"),
+    " ": ("..", "..", "..", "..", ".."),
+}
+_FONT = {c: np.array([[ch == "#" for ch in row] for row in rows]) for c, rows in _FONT_ROWS.items()}
+
+
+def _rgb(colour: str) -> Array:
+    return np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)], dtype=np.float32) / 255
+
+
+def _stroke_quads(points: Array, width: float) -> Array:
+    """Each piece of a polyline as a rectangle (M, 4, 2), extended by half the width (caps)."""
+    a, b = points[:-1], points[1:]
+    length = np.hypot(*(b - a).T)[:, None]
+    along = np.where(length > 1e-9, (b - a) / np.maximum(length, 1e-9), [1.0, 0.0])
+    side = along @ _PERP.T * (width / 2)
+    a, b = a - along * (width / 2), b + along * (width / 2)
+    return np.stack([a + side, b + side, b - side, a - side], axis=1)
+
+
+def _disc(centre: tuple[float, float], radius: float) -> Array:
+    angles = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+    return np.column_stack(
+        [centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)]
+    )
+
+
+def _scan(polygons: Array, diff: Array, rows_per_pass: int = 1 << 17) -> None:
+    """Add the spans of same-sized polygons (P, K, 2) to a row-difference image (H, W + 1).
+
+    A pixel is inside when its centre is: on each row through a polygon, the edges crossed at
+    the row's centre line, sorted, pair up into spans [enter, leave). Edges count half-open in y,
+    so a vertex on the centre line is crossed once.
+    """
+    height, stride = diff.shape
+    ys = polygons[..., 1]
+    first = np.clip(np.ceil(ys.min(axis=1) - 0.5), 0, height).astype(np.int64)
+    stop = np.clip(np.ceil(ys.max(axis=1) - 0.5), 0, height).astype(np.int64)
+    counts = stop - first
+    starts = polygons
+    ends = np.roll(polygons, -1, axis=1)
+    cumulative = np.cumsum(counts)
+    begin = 0
+    while begin < len(polygons):  # in passes of about rows_per_pass rows, to bound memory
+        base = cumulative[begin] - counts[begin]
+        end = max(int(np.searchsorted(cumulative, base + rows_per_pass, side="right")), begin + 1)
+        idx = np.repeat(np.arange(begin, end), counts[begin:end])
+        rows = first[idx] + np.arange(len(idx)) - (cumulative[idx] - counts[idx] - base)
+        centre = rows[:, None] + 0.5
+        x0, y0 = starts[idx, :, 0], starts[idx, :, 1]
+        x1, y1 = ends[idx, :, 0], ends[idx, :, 1]
+        crosses = (np.minimum(y0, y1) <= centre) & (centre < np.maximum(y0, y1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = x0 + (centre - y0) * (x1 - x0) / (y1 - y0)
+        x = np.sort(np.where(crosses, x, np.inf), axis=1)
+        if x.shape[1] % 2:
+            x = np.column_stack([x, np.full(len(x), np.inf)])
+        enter, leave = x[:, 0::2], x[:, 1::2]
+        inside = np.isfinite(leave)
+        width = stride - 1
+        a = np.clip(np.ceil(enter[inside] - 0.5), 0, width).astype(np.int64)
+        b = np.clip(np.ceil(leave[inside] - 0.5), 0, width).astype(np.int64)
+        row = np.broadcast_to(rows[:, None], enter.shape)[inside]
+        keep = b > a
+        flat_size = height * stride
+        diff += np.bincount(row[keep] * stride + a[keep], minlength=flat_size).reshape(diff.shape)
+        diff -= np.bincount(row[keep] * stride + b[keep], minlength=flat_size).reshape(diff.shape)
+        begin = end
+
+
+def _coverage(polygons: Sequence[Array], height: int, width: int) -> Array:
+    """How many of the polygons cover each pixel (H, W)."""
+    diff = np.zeros((height, width + 1), dtype=np.int64)
+    by_size: dict[int, list[Array]] = {}
+    for p in polygons:
+        by_size.setdefault(len(p), []).append(p)
+    for same in by_size.values():
+        _scan(np.stack(same).astype(float), diff)
+    return np.cumsum(diff[:, :width], axis=1)
+
+
+def _paint(image: Array, count: Array, colour: str, opacity: float) -> None:
+    """Blend a colour where count > 0; n overlapping translucent shapes compound."""
+    covered = count > 0
+    alpha = (1 - (1 - opacity) ** count[covered])[:, None].astype(np.float32)
+    image[covered] += alpha * (_rgb(colour) - image[covered])
+
+
+@functools.cache
+def _glyph(char: str, pixel: int) -> Array:
+    return np.kron(_FONT.get(char, _FONT[" "]), np.ones((pixel, pixel), dtype=bool))
+
+
+def _text_mask(text: str, pixel: int) -> Array:
+    gap = np.zeros((5 * pixel, pixel), dtype=bool)
+    parts = [part for c in text or " " for part in (_glyph(c, pixel), gap)][:-1]
+    return np.hstack(parts)
+
+
+def _paint_text(image: Array, labels: Sequence[Label], colour: str) -> None:
+    """Labels in the bitmap font, over a one-pixel halo of background for legibility."""
+    height, width = image.shape[:2]
+    text = np.zeros((height + 2, width + 2), dtype=bool)  # one pixel of border for the halo
+    for label in labels:
+        mask = _text_mask(label.text, max(1, round(label.height / 5)))
+        x = round(label.centre[0] - mask.shape[1] / 2) + 1
+        y = round(label.centre[1] - mask.shape[0] / 2) + 1
+        x0, y0 = max(x, 0), max(y, 0)
+        x1, y1 = min(x + mask.shape[1], width + 2), min(y + mask.shape[0], height + 2)
+        if x1 > x0 and y1 > y0:
+            text[y0:y1, x0:x1] |= mask[y0 - y : y1 - y, x0 - x : x1 - x]
+    halo = np.zeros((height, width), dtype=bool)
+    for dy in range(3):
+        for dx in range(3):
+            halo |= text[dy : dy + height, dx : dx + width]
+    image[halo] = _rgb(BACKGROUND)
+    image[text[1:-1, 1:-1]] = _rgb(colour)
+
+
+def _layer_key(item: Item) -> tuple[str, str, float]:
+    if isinstance(item, Label):
+        return ("text", item.colour, 1.0)
+    return ("shape", item.colour, item.opacity if isinstance(item, Fill) else 1.0)
+
+
+def _polygons(item: Fill | Stroke | Dot) -> list[Array]:
+    if isinstance(item, Fill):
+        return [item.points]
+    if isinstance(item, Stroke):
+        return list(_stroke_quads(item.points, item.width))
+    return [_disc(item.centre, item.radius)]
+
+
+def rasterise(drawing: Drawing) -> Array:
+    """Paint the drawing into an (H, W, 3) uint8 image.
+
+    Consecutive items of one colour and opacity form one layer, painted in one pass.
+    """
+    image = np.empty((drawing.height, drawing.width, 3), dtype=np.float32)
+    image[:] = _rgb(BACKGROUND)
+    for (kind, colour, opacity), group in itertools.groupby(drawing.items, key=_layer_key):
+        items = list(group)
+        if kind == "text":
+            _paint_text(image, items, colour)
+        else:
+            polygons = [p for item in items for p in _polygons(item)]
+            count = _coverage(polygons, drawing.height, drawing.width)
+            _paint(image, count, colour, opacity)
+    return np.round(image * 255).astype(np.uint8)
+
+
+def encode_png(image: Array) -> bytes:
+    """An (H, W, 3) uint8 image as an 8-bit RGB PNG (no filtering: rows are mostly flat)."""
+    height, width, _ = image.shape
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
+
+    rows = np.zeros((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0) per row
+    rows[:, 1:] = image.reshape(height, -1)
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
+        + chunk(b"IEND", b"")
+    )
+
+
+# --- files ------------------------------------------------------------------------------------
+
+
+def write_png(
+    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+) -> None:
+    """Draw a map reply to a PNG file (see ``render_map``)."""
+    Path(path).write_bytes(render_map(reply, trajectory=trajectory, size=size).to_png())
+
+
+def write_svg(
+    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+) -> None:
+    """Draw a map reply to an SVG file (see ``render_map``)."""
+    svg = render_map(reply, trajectory=trajectory, size=size).to_svg()
+    Path(path).write_text(svg, encoding="utf-8")
+
+
+def write_picture(
+    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+) -> None:
+    """PNG or SVG by the file's suffix (.png, else SVG), for commands taking one ``--out``."""
+    writer = write_png if Path(path).suffix.lower() == ".png" else write_svg
+    writer(path, reply, trajectory, size)
