@@ -85,7 +85,7 @@ def from_json(data: dict[str, Any], config: MapperConfig) -> WallMap:
         if not all(np.isfinite(a).all() for a in (wall.s, wall.p, wall.anchor, wall.ends)):
             msg = f"wall {wall.id} holds non-finite numbers"
             raise ValueError(msg)
-        wall_map.walls[wall.id] = wall
+        wall_map.restore(wall)
         wall_map.next_id = max(wall_map.next_id, wall.id + 1)
     return wall_map
 

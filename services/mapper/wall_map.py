@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from wallmap.common import ekf, wall_model
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
+from wallmap.services.mapper.wall_index import WallIndex
 
 Array = NDArray[np.float64]
 
@@ -214,6 +215,12 @@ class WallMap:
         self.merges: list[tuple[int, int, float]] = []  # (merged id, surviving id, stamp)
         self.changed: set[int] = set()  # since the last take_changes()
         self.removed: set[int] = set()
+        self.index = WallIndex(margin=self.config.max_extent_gap)
+
+    def restore(self, wall: Wall) -> None:
+        """Put back a wall read from the state file."""
+        self.walls[wall.id] = wall
+        self.index.file(wall.id, wall.ends)
 
     def integrate(self, frame: Observations, pose: Pose) -> list[int]:
         """Fold one frame's observations in; returns the wall id each observation went to."""
@@ -251,6 +258,7 @@ class WallMap:
         _, wall, innov = best
         wall.s, wall.p = ekf.update(wall.s, wall.p, innov)
         wall.extend(seg)
+        self.index.file(wall.id, wall.ends)
         wall.extent.add(seg)
         wall.n_obs += 1
         wall.last_seen = max(wall.last_seen, stamp)
@@ -274,6 +282,8 @@ class WallMap:
                 keep.first_seen = min(keep.first_seen, gone.first_seen)
                 keep.last_seen = max(keep.last_seen, gone.last_seen)
                 del self.walls[gone.id]
+                self.index.remove(gone.id)
+                self.index.file(keep.id, keep.ends)
                 self.merges.append((gone.id, keep.id, stamp))
                 self.changed.discard(gone.id)
                 self.removed.add(gone.id)
@@ -296,7 +306,7 @@ class WallMap:
         """Walls whose extent comes within ``max_gap`` (default ``max_extent_gap``) of a segment."""
         limit = self.config.max_extent_gap if max_gap is None else max_gap
         near = []
-        for wall in list(self.walls.values()):
+        for wall in (self.walls[i] for i in sorted(self.index.near(seg))):
             t_obs, t_wall = wall.along(seg), wall.along(wall.ends)
             gap = max(t_obs.min() - t_wall.max(), t_wall.min() - t_obs.max())
             if gap <= limit:
@@ -311,7 +321,7 @@ class WallMap:
         wall = Wall(self.next_id, s, p, anchor, seg.copy(), extent, 1, stamp, stamp, 1, pose.copy())
         wall.extend(seg)  # puts the end points on the line
         extent.add(seg)
-        self.walls[wall.id] = wall
+        self.restore(wall)
         self.changed.add(wall.id)
         self.next_id += 1
         return wall.id

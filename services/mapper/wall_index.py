@@ -1,0 +1,58 @@
+"""A grid over the map so association looks only at walls near an observation.
+
+Scanning every wall for every observation costs time in proportion to the map's size; a city
+block of floors holds thousands of walls. Each wall is filed under the grid cells its extent
+(grown by a margin) covers; an observation asks the cells its own segment covers. The result is a
+superset of the walls within the margin, which the caller then checks exactly.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+class WallIndex:
+    """Wall ids by grid cell."""
+
+    def __init__(self, cell: float = 2.0, margin: float = 1.0) -> None:
+        self.cell = cell
+        self.margin = margin
+        self._cells: defaultdict[tuple[int, int], set[int]] = defaultdict(set)
+        self._filed: dict[int, list[tuple[int, int]]] = {}
+
+    def _cover(self, segment: Array, margin: float) -> list[tuple[int, int]]:
+        """Cells of the segment's bounding box grown by ``margin``."""
+        lo = np.floor((segment.min(axis=0) - margin) / self.cell).astype(int)
+        hi = np.floor((segment.max(axis=0) + margin) / self.cell).astype(int)
+        return [(i, j) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)]
+
+    def file(self, wall_id: int, ends: Array) -> None:
+        """File (or re-file) a wall under the cells near its extent."""
+        self.remove(wall_id)
+        cells = self._cover(ends, self.margin)
+        for cell in cells:
+            self._cells[cell].add(wall_id)
+        self._filed[wall_id] = cells
+
+    def remove(self, wall_id: int) -> None:
+        """Forget a wall (merged away)."""
+        for cell in self._filed.pop(wall_id, ()):
+            ids = self._cells[cell]
+            ids.discard(wall_id)
+            if not ids:
+                del self._cells[cell]
+
+    def near(self, segment: Array) -> set[int]:
+        """Ids of every wall whose grown extent may come within ``margin`` of ``segment``."""
+        found: set[int] = set()
+        for cell in self._cover(segment, 0.0):
+            found |= self._cells.get(cell, set())
+        return found
+
+    def __len__(self) -> int:
+        return len(self._filed)
