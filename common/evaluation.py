@@ -2,7 +2,8 @@
 
 A mapped wall is a dict with at least ``u, v`` (the point of its infinite line closest to
 the map origin) and ``p0, p1`` (the ends of its observed extent), all in the map frame;
-an ``id`` key, if present, names it in the report. The rules:
+an ``id`` key, if present, names it in the report, and ``segments`` (pairs of points), if
+present, are the parts of the extent seen between doors. The rules:
 
 * A mapped wall matches a true, non-glass wall when the angle between their lines is
   at most ``max_angle_deg``, their extents overlap (the projections of p0, p1 onto the
@@ -12,8 +13,15 @@ an ``id`` key, if present, names it in the report. The rules:
 * recall = true non-glass walls seen in at least ``min_frames`` frames and matched /
   such walls (1 if none).
 * duplicates = true walls matched by two or more mapped walls.
-* For each matched true wall its best match (smallest offset) gives an angle and an
-  offset error; their medians are reported (NaN if nothing matched).
+* For each matched true wall its best match (smallest offset) gives an angle, an offset
+  and an end-point error; their medians are reported (NaN if nothing matched).
+* The end-point error of a match is the mean, over the mapped wall's two end points, of
+  the distance to the nearer end point of the true wall. It measures the extent, which
+  matching ignores: a wall mapped short, long or merged across a doorway shows here. A
+  mapped wall with ``segments`` has the end points of the segment that overlaps the true
+  wall most, so a door kept open inside a mapped wall is no error. The error also counts
+  ends that were never in view (hidden behind a pillar, beyond the sensor's range or
+  outside the frames recorded), so there it overstates the mapper's error.
 """
 
 from __future__ import annotations
@@ -40,6 +48,7 @@ class MapScore:
         duplicates: True walls matched by two or more mapped walls.
         median_angle_deg: Median angle error of the best matches.
         median_offset_m: Median offset error of the best matches.
+        median_endpoint_m: Median end-point error of the best matches.
         n_mapped: Mapped walls.
         n_mapped_matched: Mapped walls that match a true wall.
         n_true: True non-glass walls seen in at least ``min_frames`` frames.
@@ -53,6 +62,7 @@ class MapScore:
     duplicates: int
     median_angle_deg: float
     median_offset_m: float
+    median_endpoint_m: float
     n_mapped: int
     n_mapped_matched: int
     n_true: int
@@ -67,7 +77,8 @@ class MapScore:
             f"recall {self.recall:.3f} ({self.n_true_matched}/{self.n_true}), "
             f"duplicates {self.duplicates}, "
             f"median angle error {self.median_angle_deg:.2f} deg, "
-            f"median offset error {self.median_offset_m:.3f} m"
+            f"median offset error {self.median_offset_m:.3f} m, "
+            f"median end-point error {self.median_endpoint_m:.3f} m"
         )
 
 
@@ -116,6 +127,23 @@ def match_errors(wall: Mapping[str, Any], truth: Wall) -> tuple[float, float] | 
     return angle, abs(float(normal @ middle) - offset)
 
 
+def endpoint_error(wall: Mapping[str, Any], truth: Wall) -> float:
+    """Mean distance (m) from the mapped wall's end points to the nearer true end point.
+
+    The end points are those of the wall's segment overlapping the true wall most (the
+    nearest one if none overlaps), or ``p0, p1`` if it has no segments.
+    """
+    a, b = np.asarray(truth.p0, dtype=float), np.asarray(truth.p1, dtype=float)
+    along = (b - a) / np.linalg.norm(b - a)
+    pieces = np.asarray(wall.get("segments") or [[wall["p0"], wall["p1"]]], dtype=float)
+    s = (pieces - a) @ along  # (pieces, 2) positions along the true wall
+    overlap = np.minimum(s.max(axis=1), truth.length) - np.maximum(s.min(axis=1), 0.0)
+    ends = pieces[int(np.argmax(overlap))]
+    return float(
+        np.mean(np.linalg.norm(ends[:, None] - np.array([a, b])[None], axis=2).min(axis=1))
+    )
+
+
 def evaluate_map(
     mapped: Sequence[Mapping[str, Any]],
     plan: FloorPlan,
@@ -139,8 +167,9 @@ def evaluate_map(
         The score.
     """
     solid = [w for w in plan.walls if not w.glass]
-    # Best (smallest offset) match per true wall, and how many mapped walls match it.
-    best: dict[int, tuple[float, float]] = {}
+    # Best (smallest offset) match per true wall as (angle, offset, end-point error), and
+    # how many mapped walls match it.
+    best: dict[int, tuple[float, float, float]] = {}
     match_count = dict.fromkeys((w.id for w in solid), 0)
     unmatched_mapped: list[Any] = []
     for index, wall in enumerate(mapped):
@@ -152,7 +181,7 @@ def evaluate_map(
             matched = True
             match_count[truth.id] += 1
             if truth.id not in best or errors[1] < best[truth.id][1]:
-                best[truth.id] = errors
+                best[truth.id] = (*errors, endpoint_error(wall, truth))
         if not matched:
             unmatched_mapped.append(wall.get("id", index))
 
@@ -162,12 +191,14 @@ def evaluate_map(
     n_true_matched = len(required) - len(unmatched_true)
     angles = [e[0] for e in best.values()]
     offsets = [e[1] for e in best.values()]
+    endpoints = [e[2] for e in best.values()]
     return MapScore(
         precision=n_mapped_matched / len(mapped) if mapped else 1.0,
         recall=n_true_matched / len(required) if required else 1.0,
         duplicates=sum(1 for k in match_count.values() if k >= 2),
         median_angle_deg=float(np.median(angles)) if angles else math.nan,
         median_offset_m=float(np.median(offsets)) if offsets else math.nan,
+        median_endpoint_m=float(np.median(endpoints)) if endpoints else math.nan,
         n_mapped=len(mapped),
         n_mapped_matched=n_mapped_matched,
         n_true=len(required),

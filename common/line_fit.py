@@ -9,6 +9,7 @@ the two independent. Both are mapped to (u, v) by the Jacobian of ``(u, v) = (n 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,8 @@ class LineFit:
         n_points: points in the fit.
         rms: root-mean-square distance of the points from the line.
         angle_sd: standard deviation of the line's direction (rad).
+        noise_ratio: residual spread relative to the given per-point noise (1 when the noise
+            model is right; NaN without one).
     """
 
     normal: Array
@@ -43,6 +46,7 @@ class LineFit:
     n_points: int
     rms: float
     angle_sd: float
+    noise_ratio: float
 
     @property
     def length(self) -> float:
@@ -93,6 +97,7 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
         n_points=n,
         rms=float(np.sqrt(residuals @ residuals / n)),
         angle_sd=float(np.sqrt(cov_scale * var_angle)),
+        noise_ratio=math.nan if sigmas is None else math.sqrt(chi2_per_dof),
     )
 
 

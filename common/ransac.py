@@ -10,7 +10,8 @@ or an occluder.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import itertools
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +30,8 @@ class RansacParams:
         inlier_min: inlier distance at short range (m).
         inlier_sigmas: inlier distance in units of the range-dependent noise.
         noise_k: depth noise sigma = noise_k * range^2 (a Kinect's is 1.425e-3; 0 for a lidar).
+        noise_scale: factor on the per-point noise, which the detector adapts to what the
+            residuals show (a sensor noisier or quieter than assumed).
         min_points: fewest points that make a line.
         min_length: shortest segment reported (m).
         max_gap: largest gap between neighbouring inliers along one line (m).
@@ -39,20 +42,27 @@ class RansacParams:
         max_angle_sd: lines less sure of their direction than this are dropped (rad): a short,
             far, noisy segment cannot tell two walls meeting at a shallow angle apart, and fed
             to the map it blends them into a wall that is neither.
+        corner_reach: two lines of one cluster whose ends lie this close to their intersection
+            (m) meet there: near a corner the inlier band takes in the other wall's points and
+            would carry each line past the corner.
+        corner_angle: lines closer to parallel than this (rad) have no corner.
     """
 
     iterations: int = 96
     inlier_min: float = 0.02
     inlier_sigmas: float = 3.0
     noise_k: float = 1.425e-3
+    noise_scale: float = 1.0
     min_points: int = 12
-    min_length: float = 0.4
+    min_length: float = 0.25
     max_gap: float = 0.3
     max_lines: int = 8
     sigma_floor: float = 0.005
     cov_scale: float = 4.0
-    split_f: float = 12.0
+    split_f: float = 6.0
     max_angle_sd: float = 0.04
+    corner_reach: float = 0.4
+    corner_angle: float = np.radians(3.0)
 
 
 def split_at_nans(points: Array) -> list[NDArray[np.intp]]:
@@ -65,7 +75,7 @@ def split_at_nans(points: Array) -> list[NDArray[np.intp]]:
 def point_sigmas(points: Array, params: RansacParams) -> Array:
     """Per-point noise: a depth camera's grows with the square of the range."""
     range2 = np.einsum("ij,ij->i", points, points)
-    return np.maximum(params.sigma_floor, params.noise_k * range2)
+    return params.noise_scale * np.maximum(params.sigma_floor, params.noise_k * range2)
 
 
 def _best_hypothesis(
@@ -135,10 +145,30 @@ def find_lines(points: Array, params: RansacParams, rng: np.random.Generator) ->
     return lines
 
 
+def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]:
+    """End lines that nearly meet at an angle at their intersection, both of them."""
+    lines = list(lines)
+    for i, j in itertools.combinations(range(len(lines)), 2):
+        a, b = lines[i], lines[j]
+        if abs(a.normal[0] * b.normal[1] - a.normal[1] * b.normal[0]) < np.sin(params.corner_angle):
+            continue
+        corner = np.linalg.solve(np.array([a.normal, b.normal]), np.array([a.offset, b.offset]))
+        ends = []
+        for line in (a, b):
+            distance = np.linalg.norm(np.array([line.p0, line.p1]) - corner, axis=1)
+            ends.append(int(np.argmin(distance)) if distance.min() <= params.corner_reach else None)
+        if None not in ends:
+            lines[i], lines[j] = (
+                replace(line, **{("p0", "p1")[end]: corner})
+                for line, end in zip((a, b), ends, strict=True)
+            )
+    return lines
+
+
 def detect_lines(scan: Array, params: RansacParams, rng: np.random.Generator) -> list[LineFit]:
     """All wall lines of one scan row (N x 2, NaN where there is no point)."""
     lines: list[LineFit] = []
     for cluster in split_at_nans(scan):
         if len(cluster) >= params.min_points:
-            lines.extend(find_lines(scan[cluster], params, rng))
+            lines.extend(meet_at_corners(find_lines(scan[cluster], params, rng), params))
     return lines

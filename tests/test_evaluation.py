@@ -56,10 +56,50 @@ def test_perfect_map_of_a_generated_plan_scores_one():
     assert score.duplicates == 0
     assert score.median_angle_deg == pytest.approx(0.0, abs=1e-6)
     assert score.median_offset_m == pytest.approx(0.0, abs=1e-9)
+    assert score.median_endpoint_m == pytest.approx(0.0, abs=1e-9)
     assert score.n_true == sum(not w.glass for w in plan.walls)
     assert score.unmatched_mapped == []
     assert score.unmatched_true == []
     assert "precision 1.000" in score.summary()
+    assert "median end-point error 0.000 m" in score.summary()
+
+
+def test_end_point_error_of_walls_mapped_20_cm_short_at_one_end():
+    plan = generate_floorplan(4)
+    mapped = []
+    for w in plan.walls:
+        if not w.glass:
+            p0, p1 = np.asarray(w.p0), np.asarray(w.p1)
+            # Reversed, to show that each mapped end is compared with the nearer true end.
+            mapped.append(as_mapped(p1 - 0.2 * (p1 - p0) / w.length, p0))
+
+    score = evaluate_map(mapped, plan, {w.id: 20 for w in plan.walls})
+
+    assert score.precision == 1.0
+    assert score.median_offset_m == pytest.approx(0.0, abs=1e-9)
+    assert score.median_endpoint_m == pytest.approx(0.1)  # mean of 0 and 0.2
+
+
+def test_end_point_error_shows_a_wall_merged_across_two():
+    plan = FloorPlan(walls=(Wall(0, (0.0, 3.0), (2.0, 3.0)), Wall(1, (2.0, 3.0), (4.0, 3.0))))
+
+    score = evaluate_map([as_mapped((0.0, 3.0), (4.0, 3.0))], plan, {0: 5, 1: 5})
+
+    # Each true wall has one mapped end on its own end and the other 2 m past it.
+    assert score.median_endpoint_m == pytest.approx(1.0)
+
+
+def test_end_point_error_of_a_wall_with_a_door_uses_its_segments():
+    # Two walls on one line with a 1 m door between them, mapped as one wall whose segments
+    # stop 10 cm short of the jambs.
+    plan = FloorPlan(walls=(Wall(0, (0.0, 3.0), (2.0, 3.0)), Wall(1, (3.0, 3.0), (5.0, 3.0))))
+    wall = as_mapped((0.0, 3.0), (5.0, 3.0))
+    wall["segments"] = [[[0.0, 3.0], [1.9, 3.0]], [[3.1, 3.0], [5.0, 3.0]]]
+
+    score = evaluate_map([wall], plan, {0: 5, 1: 5})
+
+    assert score.recall == 1.0
+    assert score.median_endpoint_m == pytest.approx(0.05)
 
 
 def test_shift_of_20_cm_does_not_match_but_10_cm_does():
@@ -171,6 +211,7 @@ def test_empty_map():
     assert score.recall == 0.0
     assert math.isnan(score.median_angle_deg)
     assert math.isnan(score.median_offset_m)
+    assert math.isnan(score.median_endpoint_m)
 
 
 def test_one_long_mapped_wall_over_two_collinear_walls_counts_once():

@@ -2,6 +2,7 @@ import json
 import math
 import time
 from collections import Counter, defaultdict
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from wallmap.common.scene import (
     ODOM_TOPIC,
     POINTS_TOPIC,
     SCAN_TOPIC,
+    SCENE_KINDS,
     TF_STATIC_TOPIC,
     TF_TOPIC,
     Camera,
@@ -37,9 +39,10 @@ from wallmap.common.scene import (
     write_scene_bag,
     write_tum,
 )
-from wallmap.common.scene.floorplan import segment_distances
+from wallmap.common.scene.floorplan import point_segment_distance, segment_distances
 
 SEEDS = [0, 1, 2, 3, 11, 42]
+SAMPLE_TRUTH = Path(__file__).parents[1] / "wallmap" / "data" / "sample.bag.truth.json"
 
 
 def wall_angles_deg(plan):
@@ -138,6 +141,126 @@ def test_plans_are_non_manhattan_and_well_formed(seed):
 
 def test_more_rooms_make_more_doorways():
     assert len(doorway_centres(generate_floorplan(5, n_rooms=5))) == 4
+
+
+def test_default_plan_is_still_the_one_the_sample_bag_was_made_from():
+    truth = json.loads(SAMPLE_TRUTH.read_text())
+
+    assert generate_floorplan(truth["seed"]).to_json() == truth["plan"]
+
+
+def walls_meet_only_where_joined(plan):
+    """Walls come close only at a shared vertex or where one ends on the other (a T)."""
+    starts = np.array([w.p0 for w in plan.walls])
+    ends = np.array([w.p1 for w in plan.walls])
+    gaps = segment_distances(starts, ends, starts, ends)
+    joined = np.zeros_like(gaps, dtype=bool)
+    for u in (starts, ends):
+        on = point_segment_distance(u, starts, ends) < 1e-9
+        joined |= on | on.T
+    return gaps[~joined].min() > 0.2
+
+
+@pytest.mark.parametrize("name", SCENE_KINDS)
+@pytest.mark.parametrize("seed", [3, 500])
+def test_scene_kinds_give_valid_deterministic_plans(name, seed):
+    kind = SCENE_KINDS[name]
+    plan = kind.plan(seed)
+    traj = generate_trajectory(plan, seed)
+
+    assert kind.plan(seed) == plan
+    assert kind.plan(seed + 1).to_json() != plan.to_json()
+    assert len({w.id for w in plan.walls}) == len(plan.walls)
+    assert walls_meet_only_where_joined(plan)
+    pillar_face = pytest.approx(0.3)
+    assert all(1.0 <= w.length <= 8.0 or w.length == pillar_face for w in plan.walls)
+    relative = (wall_angles_deg(plan) - wall_angles_deg(plan)[0]) % 90.0
+    assert np.sum((relative > 10.0) & (relative < 80.0)) >= 3
+    assert all(box.height <= 1.1 for box in plan.furniture)
+    assert plan.route[0] == (0.0, 0.0)
+    assert clearance(plan, np.column_stack([traj.x, traj.y])).min() >= 0.6
+
+
+@pytest.mark.parametrize("name", ["non-manhattan", "tilted", "noisy"])
+def test_camera_kinds_share_the_default_plan(name):
+    assert SCENE_KINDS[name].plan(500) == generate_floorplan(500)
+
+
+@pytest.mark.parametrize("seed", [3, 500, 501])
+def test_corridor_is_long_and_narrow_with_doors_on_both_sides(seed):
+    plan = SCENE_KINDS["corridor"].plan(seed)
+    route = np.array(plan.route)
+    # Door jambs are the free wall ends: on no wall but their own. A side room's walls end
+    # on the side wall in a T: on two walls, but no other wall's vertex.
+    starts = np.array([w.p0 for w in plan.walls])
+    ends = np.array([w.p1 for w in plan.walls])
+    points = [p for w in plan.walls for p in (w.p0, w.p1)]
+    on_walls = (point_segment_distance(np.array(points), starts, ends) < 1e-9).sum(axis=1)
+    vertex_of = Counter(points)
+    free = np.array([p for p, k in zip(points, on_walls, strict=True) if k == 1])
+    tees = [p for p, k in zip(points, on_walls, strict=True) if k == 2 and vertex_of[p] == 1]
+    jambs = np.linalg.norm(free[:, None] - free[None], axis=2)
+    np.fill_diagonal(jambs, np.inf)
+    door_widths = jambs.min(axis=1)
+    # Which side of the route each jamb is on, against the route's nearest leg.
+    nearest = point_segment_distance(free, route[:-1], route[1:]).argmin(axis=1)
+    leg = route[nearest + 1] - route[nearest]
+    rel = free - route[nearest]
+    side = np.sign(leg[:, 0] * rel[:, 1] - leg[:, 1] * rel[:, 0])
+
+    assert np.linalg.norm(np.diff(route, axis=0), axis=1).sum() >= 15.0
+    assert len(free) >= 6
+    assert door_widths.min() >= 0.9 - 1e-9
+    assert door_widths.max() <= 1.2 + 1e-9
+    assert set(side.tolist()) == {1.0, -1.0}
+    assert len(tees) >= 2  # at least one side room
+    near_walls = clearance(plan, np.array(plan.route))
+    assert near_walls.max() <= 1.25 + 1e-9  # at most 2.5 m wide
+    assert near_walls.min() >= 0.9 - 1e-9  # at least 1.8 m wide
+
+
+@pytest.mark.parametrize("seed", [3, 500])
+def test_glass_scene_is_mostly_glass(seed):
+    plan = SCENE_KINDS["glass"].plan(seed)
+
+    assert sum(w.glass for w in plan.walls) / len(plan.walls) >= 0.4
+
+
+@pytest.mark.parametrize("seed", [3, 500])
+def test_clutter_scene_has_dense_furniture_and_pillars(seed):
+    plan = SCENE_KINDS["clutter"].plan(seed)
+    pillars = [w for w in plan.walls if w.length < 0.5]
+    ends = Counter(p for w in pillars for p in (w.p0, w.p1))
+
+    assert len(plan.furniture) >= 12
+    assert len(pillars) >= 8  # two pillars or more
+    assert all(w.length == pytest.approx(0.3) for w in pillars)
+    assert all(k == 2 for k in ends.values())  # closed squares
+    assert not any(w.glass for w in pillars)
+    assert all(w.height == plan.ceiling_height for w in pillars)
+
+
+def test_pillars_only_in_rooms():
+    with pytest.raises(ValueError, match="pillars"):
+        generate_floorplan(1, layout="corridor", pillars_per_room=1)
+
+
+@pytest.mark.parametrize(
+    ("name", "key", "value"), [("tilted", "tilt_deg", 8.0), ("noisy", "noise_k", 2.85e-3)]
+)
+def test_camera_kinds_are_in_the_truth_file(tmp_path, name, key, value):
+    kind = SCENE_KINDS[name]
+    info = write_scene_bag(
+        tmp_path / "scene.bag",
+        seed=500,
+        n_frames=2,
+        fmt="ros1",
+        sensor="depth16",
+        camera=kind.camera,
+        plan=kind.plan(500),
+    )
+
+    assert json.loads(info.truth_path.read_text())["camera"][key] == pytest.approx(value)
 
 
 # --- trajectories --------------------------------------------------------------------------

@@ -309,3 +309,28 @@ def test_a_wall_passing_close_to_the_sensor_is_mapped_as_well_as_any_other():
     assert wall["u"] == pytest.approx(0.0, abs=0.005)
     assert wall["v"] == pytest.approx(0.35, abs=0.005)
     assert line_error(wall, (-1.0, 0.35), (5.0, 0.35)) < 0.01
+
+
+def test_a_line_blended_across_a_shallow_corner_is_a_shadow_not_a_wall():
+    wall_map = WallMap()
+    for i in range(12):  # the real wall y = 2, seen often from distinct places
+        wall_map.integrate(
+            Observations("r", i, float(i), "base_link", [along_wall(-3, 3)]), Pose(i, 0.2 * i, 0, 0)
+        )
+    # A few views of a line 3 degrees off along the same stretch (too far off to merge).
+    tilt = np.radians(3.0)
+    n = np.array([-np.sin(tilt), np.cos(tilt)])
+    for i in range(3):
+        closest = 2.0 * n
+        d = np.array([n[1], -n[0]])
+        obs = WallObservation(
+            closest, np.eye(2) * 1e-6, closest - 1.5 * d, closest + 1.5 * d, 40, 0.01
+        )
+        wall_map.integrate(
+            Observations("r", 20 + i, 20.0 + i, "base_link", [obs]), Pose(20.0 + i, 0.3 * i, 0, 0)
+        )
+    served = wall_map.reply()["walls"]
+    assert len(wall_map.walls) == 2
+    assert [w["id"] for w in served] == [0]
+    shadow = [w for w in wall_map.reply(MapQuery(tentative=True))["walls"] if w["id"] == 1]
+    assert shadow[0]["tentative"]

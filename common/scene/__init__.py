@@ -28,11 +28,13 @@ from .bags import (
 from .floorplan import (
     FloorPlan,
     Furniture,
+    Layout,
     Wall,
     clearance,
     generate_floorplan,
     smooth_route,
 )
+from .kinds import SCENE_KINDS, SceneKind
 from .render import (
     Camera,
     Scanner,
@@ -65,14 +67,17 @@ __all__ = [
     "OPTICAL_FRAME",
     "POINTS_TOPIC",
     "SCAN_TOPIC",
+    "SCENE_KINDS",
     "TF_STATIC_TOPIC",
     "TF_TOPIC",
     "BagFormat",
     "Camera",
     "FloorPlan",
     "Furniture",
+    "Layout",
     "Scanner",
     "SceneInfo",
+    "SceneKind",
     "SensorKind",
     "Trajectory",
     "Wall",

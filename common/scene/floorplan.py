@@ -1,10 +1,11 @@
-"""Random non-Manhattan floor plans: a strip of rooms joined by doorways.
+"""Random non-Manhattan floor plans: a strip of rooms joined by doorways, or a corridor.
 
 The plans are ground truth for the wall mapper, so they are built to be hard in the ways
 the paper's method must cope with: walls at arbitrary angles, kinked side walls, glass
-that returns no depth and furniture below the detector's height band. Every plan carries
-a ``route`` (waypoints through the doorways) so that a trajectory can drive through it
-without touching anything.
+that returns no depth, furniture below the detector's height band, and on request narrow
+doors into side rooms or thin pillars. Every plan carries a ``route`` (waypoints through
+the doorways or down the corridor) so that a trajectory can drive through it without
+touching anything.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -26,6 +27,11 @@ _ROUTE_FURNITURE_CLEARANCE = 0.85
 _MIN_WALL_GAP = 0.3
 _MIN_KINK_DEG = 10.0
 _MAX_ATTEMPTS = 200
+_PILLAR_SIZE = 0.3
+_DOOR_WIDTH = (0.9, 1.2)  # corridor doors: ordinary ones, narrower than the strip's doorways
+_MIN_PIECE = 1.0  # shortest corridor wall piece, as the shortest wall of a strip plan
+
+Layout = Literal["rooms", "corridor"]
 
 
 @dataclass(frozen=True)
@@ -265,8 +271,36 @@ def _side_polyline(
     return rooms
 
 
+def _walls_well_formed(
+    segments: Sequence[tuple[np.ndarray, np.ndarray]], *, tees: bool = False
+) -> bool:
+    """Every wall is 1-8 m long, and walls come close only where they are joined.
+
+    Walls meeting at a corner share an exact vertex; with ``tees``, a wall may also end on
+    another one (a T). Any other pair must stay ``_MIN_WALL_GAP`` apart, so that no two
+    walls blur into one in a depth image.
+    """
+    if not all(1.0 <= float(np.linalg.norm(q - p)) <= 8.0 for p, q in segments):
+        return False
+    starts = np.array([p for p, _ in segments])
+    ends = np.array([q for _, q in segments])
+    gaps = segment_distances(starts, ends, starts, ends)
+    joined = np.zeros_like(gaps, dtype=bool)
+    for u in (starts, ends):
+        for v in (starts, ends):
+            joined |= np.all(u[:, None] == v[None], axis=2)
+        if tees:
+            on = point_segment_distance(u, starts, ends) < 1e-9
+            joined |= on | on.T
+    return not (gaps[~joined] < _MIN_WALL_GAP).any()
+
+
 def _try_plan(
-    rng: np.random.Generator, n_rooms: int, glass_fraction: float, furniture_per_room: int
+    rng: np.random.Generator,
+    n_rooms: int,
+    glass_fraction: float,
+    furniture_per_room: int,
+    pillars_per_room: int,
 ) -> FloorPlan | None:
     """One attempt at a plan in strip coordinates (x along the strip); None if invalid."""
     lengths = rng.uniform(6.5, 8.5, n_rooms)
@@ -297,8 +331,8 @@ def _try_plan(
 
     # Segments in strip coordinates, with the room each side segment belongs to.
     segments: list[tuple[np.ndarray, np.ndarray]] = []
-    # (room, a, b, sign of y pointing from the wall towards the strip axis)
-    side_segments: list[tuple[int, np.ndarray, np.ndarray, float]] = []
+    # (room, a, b, direction from the wall towards the strip axis)
+    side_segments: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
     segments.append((right_anchor[0], left_anchor[0]))
     segments.append((right_anchor[-1], left_anchor[-1]))
     for b in range(1, n_rooms):
@@ -309,19 +343,9 @@ def _try_plan(
         for room, verts in enumerate(side):
             for p, q in pairwise(verts):
                 segments.append((p, q))
-                side_segments.append((room, p, q, inward))
+                side_segments.append((room, p, q, np.array([0.0, inward])))
 
-    if not all(1.0 <= float(np.linalg.norm(q - p)) <= 8.0 for p, q in segments):
-        return None
-    starts = np.array([p for p, _ in segments])
-    ends = np.array([q for _, q in segments])
-    gaps = segment_distances(starts, ends, starts, ends)
-    # Walls meeting at a corner share an exact vertex; any other pair must stay apart.
-    shares_end = np.zeros_like(gaps, dtype=bool)
-    for u in (starts, ends):
-        for v in (starts, ends):
-            shares_end |= np.all(u[:, None] == v[None], axis=2)
-    if (gaps[~shares_end] < _MIN_WALL_GAP).any():
+    if not _walls_well_formed(segments):
         return None
 
     # Route: start, through every doorway perpendicular to its divider, end.
@@ -356,11 +380,11 @@ def _try_plan(
                     furniture.append(box)
                     break
 
-    n_glass = round(glass_fraction * len(walls))
-    glass_ids = set(rng.choice(len(walls), size=n_glass, replace=False).tolist())
-    walls = tuple(
-        Wall(id=w.id, p0=w.p0, p1=w.p1, glass=w.id in glass_ids, height=w.height) for w in walls
-    )
+    walls = _with_glass(rng, walls, glass_fraction)
+    # Drawn last, so that plans without pillars come out as they always did.
+    for room in range(n_rooms):
+        for _ in range(pillars_per_room):
+            walls += _place_pillar(rng, walls, furniture, curve, (xs[room], xs[room + 1]))
     return FloorPlan(
         walls=walls,
         furniture=tuple(furniture),
@@ -369,13 +393,198 @@ def _try_plan(
     )
 
 
+def _with_glass(
+    rng: np.random.Generator, walls: tuple[Wall, ...], glass_fraction: float
+) -> tuple[Wall, ...]:
+    """The walls with a random ``glass_fraction`` of them turned to glass."""
+    n_glass = round(glass_fraction * len(walls))
+    glass_ids = set(rng.choice(len(walls), size=n_glass, replace=False).tolist())
+    return tuple(
+        Wall(id=w.id, p0=w.p0, p1=w.p1, glass=w.id in glass_ids, height=w.height) for w in walls
+    )
+
+
+def _place_pillar(
+    rng: np.random.Generator,
+    walls: tuple[Wall, ...],
+    furniture: Sequence[Furniture],
+    curve: np.ndarray,
+    x_range: tuple[float, float],
+) -> tuple[Wall, ...]:
+    """Four walls of a free-standing pillar in the room spanning ``x_range``, or () if none fit.
+
+    The pillar stands 1.2-2.2 m beside the route, as far from walls as walls are from
+    each other and as far from the route as furniture is, so a robot can pass it.
+    """
+    in_room = np.flatnonzero((curve[:, 0] > x_range[0] + 1.0) & (curve[:, 0] < x_range[1] - 1.0))
+    height = walls[0].height
+    for _ in range(30):
+        foot = curve[in_room[rng.integers(len(in_room))]]
+        center = foot + np.array([0.0, rng.choice([-1.0, 1.0]) * rng.uniform(1.2, 2.2)])
+        box = Furniture(
+            _point(center), (_PILLAR_SIZE, _PILLAR_SIZE), float(rng.uniform(0, math.pi)), height
+        )
+        corners, ends = _box_edges(box)
+        wall_a = np.array([w.p0 for w in walls])
+        wall_b = np.array([w.p1 for w in walls])
+        if segment_distances(corners, ends, wall_a, wall_b).min() < _MIN_WALL_GAP:
+            continue
+        # Seen from the route, not hidden behind a wall (or outside the building).
+        if segment_distances(foot[None], center[None], wall_a, wall_b).min() <= 0.0:
+            continue
+        # Clear of the furniture, and of the route by as much as furniture is.
+        if not _box_fits(FloorPlan(walls=walls, furniture=(*furniture, box)), box, curve):
+            continue
+        first = len(walls)
+        return tuple(
+            Wall(id=first + k, p0=_point(a), p1=_point(b), height=height)
+            for k, (a, b) in enumerate(zip(corners, ends, strict=True))
+        )
+    return ()
+
+
+def _line_intersection(p: np.ndarray, d: np.ndarray, q: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Where the lines p + t d and q + s e cross; they must not be parallel."""
+    return p + float(_cross2(q - p, e) / _cross2(d, e)) * d
+
+
+def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _corridor_walls(
+    sides: list[list[np.ndarray]], doors: dict[tuple[int, int], list[tuple[float, float]]]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """End caps, and the side walls cut at the doors."""
+    segments = [(sides[1][0], sides[0][0]), (sides[0][-1], sides[1][-1])]
+    for side, verts in enumerate(sides):
+        for run, (start, end) in enumerate(pairwise(verts)):
+            length = float(np.linalg.norm(end - start))
+            unit = (end - start) / length
+            gaps = doors[side, run]
+            # Every vertex is made once, so that walls meeting there share it exactly.
+            points = {0.0: start, length: end}
+            points.update({t: start + t * unit for gap in gaps for t in gap})
+            cuts = sorted(points)
+            segments.extend(
+                (points[t0], points[t1]) for t0, t1 in pairwise(cuts) if (t0, t1) not in gaps
+            )
+    return segments
+
+
+def _try_corridor(
+    rng: np.random.Generator, n_legs: int, glass_fraction: float, furniture_per_room: int
+) -> FloorPlan | None:
+    """One attempt at a corridor plan (x along its first leg); None if invalid."""
+    lengths = rng.uniform(6.2, 7.2, n_legs)
+    turns = rng.choice([-1.0, 1.0], n_legs - 1) * np.radians(rng.uniform(10.0, 25.0, n_legs - 1))
+    headings = np.concatenate([[0.0], np.cumsum(turns)])
+    dirs = np.column_stack([np.cos(headings), np.sin(headings)])
+    normals = np.column_stack([-dirs[:, 1], dirs[:, 0]])
+    centre = np.vstack([[0.0, 0.0], np.cumsum(lengths[:, None] * dirs, axis=0)])
+    half_width = rng.uniform(0.9, 1.25)
+    caps = np.radians(rng.uniform(-15.0, 15.0, 2))
+    cap_dirs = (_rotated(normals[0], caps[0]), _rotated(normals[-1], caps[1]))
+
+    # Side walls (0 left, 1 right): the centre line offset by half the width, mitred at kinks.
+    sides: list[list[np.ndarray]] = []
+    for sign in (1.0, -1.0):
+        offset = sign * half_width * normals
+        verts = [_line_intersection(centre[0] + offset[0], dirs[0], centre[0], cap_dirs[0])]
+        verts += [
+            _line_intersection(
+                centre[i] + offset[i - 1], dirs[i - 1], centre[i] + offset[i], dirs[i]
+            )
+            for i in range(1, n_legs)
+        ]
+        verts.append(_line_intersection(centre[-1] + offset[-1], dirs[-1], centre[-1], cap_dirs[1]))
+        sides.append(verts)
+
+    # Up to two doors per run, wall pieces of at least _MIN_PIECE between them; most doors
+    # get a small room behind: three walls ending in Ts on the side wall 0.5-1.5 m beyond
+    # the jambs, which keeps the side wall one wall, as it looks from the corridor.
+    doors: dict[tuple[int, int], list[tuple[float, float]]] = {}
+    candidates: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    for side, verts in enumerate(sides):
+        outward = normals * (1.0 if side == 0 else -1.0)
+        for run, (start, end) in enumerate(pairwise(verts)):
+            length = float(np.linalg.norm(end - start))
+            unit = (end - start) / length
+            k = int(rng.choice(3, p=[0.25, 0.5, 0.25]))
+            widths = rng.uniform(*_DOOR_WIDTH, k)
+            spare = length - widths.sum() - (k + 1) * _MIN_PIECE
+            if spare < 0:
+                return None
+            pieces = _MIN_PIECE + spare * rng.dirichlet(np.ones(k + 1))
+            s0 = np.cumsum(pieces[:-1]) + np.concatenate([[0.0], np.cumsum(widths[:-1])])
+            doors[side, run] = [(float(a), float(a + w)) for a, w in zip(s0, widths, strict=True)]
+            for j, (d0, d1) in enumerate(doors[side, run]):
+                if rng.random() < 0.3:
+                    continue
+                # Ts at least _MIN_WALL_GAP from the ends of their piece of side wall.
+                a = start + (d0 - rng.uniform(0.5, min(1.5, pieces[j] - _MIN_WALL_GAP))) * unit
+                b = start + (d1 + rng.uniform(0.5, min(1.5, pieces[j + 1] - _MIN_WALL_GAP))) * unit
+                depth_a, depth_b = rng.uniform(2.0, 3.0, 2)
+                lean_a, lean_b = np.radians(rng.uniform(-20.0, 20.0, 2))
+                far_a = a + depth_a * _rotated(outward[run], lean_a)
+                far_b = b + depth_b * _rotated(outward[run], lean_b)
+                candidates.append([(a, far_a), (far_a, far_b), (far_b, b)])
+    if sum(map(len, doors.values())) < 3 or not all(
+        any(doors[side, run] for run in range(n_legs)) for side in (0, 1)
+    ):
+        return None
+    segments = _corridor_walls(sides, doors)
+    if not _walls_well_formed(segments):
+        return None
+    # A room that would come too near another wall stays a plain gap.
+    rooms: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    for room in candidates:
+        if _walls_well_formed([*segments, *room], tees=True):
+            segments += room
+            rooms.append(room)
+    if not rooms:
+        return None
+
+    route = [centre[0] + 1.5 * dirs[0]]
+    for i in range(1, n_legs):
+        route += [centre[i] - 0.8 * dirs[i - 1], centre[i], centre[i] + 0.8 * dirs[i]]
+    route.append(centre[-1] - 1.5 * dirs[-1])
+
+    ceiling = float(rng.uniform(2.5, 3.0))
+    walls = tuple(
+        Wall(id=i, p0=_point(p), p1=_point(q), height=ceiling) for i, (p, q) in enumerate(segments)
+    )
+    plan = FloorPlan(walls=walls, ceiling_height=ceiling, route=tuple(_point(p) for p in route))
+    curve = smooth_route(plan.route)
+    if clearance(plan, curve).min() < _ROUTE_WALL_CLEARANCE:
+        return None
+
+    furniture: list[Furniture] = []
+    for room in rooms:
+        middle = np.mean([p for p, _ in room] + [room[-1][1]], axis=0)
+        for _ in range(furniture_per_room):
+            for _ in range(30):
+                p, q = room[rng.integers(3)]
+                box = _furniture_along(rng, p, q, middle - (p + q) / 2)
+                if _box_fits(FloorPlan(walls=walls, furniture=(*furniture, box)), box, curve):
+                    furniture.append(box)
+                    break
+    return FloorPlan(
+        walls=_with_glass(rng, walls, glass_fraction),
+        furniture=tuple(furniture),
+        ceiling_height=ceiling,
+        route=plan.route,
+    )
+
+
 def _furniture_along(
-    rng: np.random.Generator, p: np.ndarray, q: np.ndarray, inward_y: float
+    rng: np.random.Generator, p: np.ndarray, q: np.ndarray, inward: np.ndarray
 ) -> Furniture:
-    """A box standing against the wall p→q, on the side facing the strip's axis."""
+    """A box standing against the wall p→q, on the side ``inward`` points to."""
     direction = (q - p) / np.linalg.norm(q - p)
     normal = np.array([-direction[1], direction[0]])
-    if normal[1] * inward_y < 0:
+    if normal @ inward < 0:
         normal = -normal
     w, d = rng.uniform(0.6, 1.6), rng.uniform(0.4, 0.7)
     foot = p + rng.uniform(0.15, 0.85) * (q - p)
@@ -437,34 +646,55 @@ def _transform_plan(plan: FloorPlan, angle: float, origin: np.ndarray) -> FloorP
 
 
 def generate_floorplan(
-    seed: int, *, n_rooms: int = 3, glass_fraction: float = 0.15, furniture_per_room: int = 2
+    seed: int,
+    *,
+    n_rooms: int = 3,
+    glass_fraction: float = 0.15,
+    furniture_per_room: int = 2,
+    layout: Layout = "rooms",
+    pillars_per_room: int = 0,
 ) -> FloorPlan:
-    """A random non-Manhattan plan: a strip of rooms a robot can drive through.
+    """A random non-Manhattan plan a robot can drive through.
 
-    The two long side walls are polylines with random kinks; the rooms are divided by
-    walls leaning up to 35 degrees from perpendicular, each with a 1.5-1.7 m doorway (wide
-    enough to pass with 0.6 m clearance to the jambs); the whole plan is rotated by a
-    random angle and placed so that the route starts at the map origin. Every wall is
-    1-8 m long. The same seed always gives the same plan.
+    Layout ``rooms`` (the default) is a strip of rooms: the two long side walls are
+    polylines with random kinks; the rooms are divided by walls leaning up to 35 degrees
+    from perpendicular, each with a 1.5-1.7 m doorway (wide enough to pass with 0.6 m
+    clearance to the jambs). Layout ``corridor`` is a corridor 1.8-2.5 m wide of straight
+    legs joined by kinks of 10-25 degrees. Its side walls have up to two 0.9-1.2 m doors
+    per leg (at least three in all, and some on each side); at least one door opens into a
+    small room (2-3 m deep, side walls leaning up to 20 degrees), the others into nothing.
+    The route runs down the corridor's middle. Either way the whole plan is rotated by a
+    random angle and placed so that the route starts at the map origin, and every wall is
+    1-8 m long except the faces of pillars. The same arguments always give the same plan.
 
     Args:
         seed: Random seed.
-        n_rooms: Number of rooms along the strip (6.5-8.5 m each).
+        n_rooms: Rooms along the strip (6.5-8.5 m each), or legs of the corridor
+            (6.2-7.2 m each).
         glass_fraction: Fraction of walls that are glass (no depth return).
-        furniture_per_room: Boxes placed against the side walls, away from the route.
+        furniture_per_room: Boxes placed against the side walls away from the route, or
+            for a corridor against the walls of each room behind a door.
+        layout: ``rooms`` or ``corridor``.
+        pillars_per_room: Free-standing square pillars (0.3 m, full height) per room,
+            beside the route; each adds four walls. Only for the ``rooms`` layout.
 
     Returns:
-        The plan, with ``route`` set to waypoints through all rooms.
+        The plan, with ``route`` set to waypoints through all rooms or down the corridor.
 
     Raises:
-        ValueError: If ``n_rooms`` is less than 1.
+        ValueError: If ``n_rooms`` is less than 1, or pillars are asked of a corridor.
         RuntimeError: If no valid plan was found (not expected for sane arguments).
     """
     if n_rooms < 1:
         raise ValueError("n_rooms must be at least 1")
+    if layout == "corridor" and pillars_per_room:
+        raise ValueError("a corridor has no room for pillars")
     rng = np.random.default_rng(seed)
     for _ in range(_MAX_ATTEMPTS):
-        strip = _try_plan(rng, n_rooms, glass_fraction, furniture_per_room)
+        if layout == "corridor":
+            strip = _try_corridor(rng, n_rooms, glass_fraction, furniture_per_room)
+        else:
+            strip = _try_plan(rng, n_rooms, glass_fraction, furniture_per_room, pillars_per_room)
         if strip is not None:
             angle = float(rng.uniform(-math.pi, math.pi))
             return _transform_plan(strip, angle, np.asarray(strip.route[0]))

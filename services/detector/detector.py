@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from wallmap.common.line_fit import LineFit
 from wallmap.common.messages import Frame, Observations, WallObservation
 from wallmap.common.ransac import RansacParams, detect_lines
 from wallmap.services.detector.scan_row import RowSelection, select_scan
@@ -34,18 +36,46 @@ class DetectorConfig:
     seed: int = 0
 
 
+class NoiseLevel:
+    """How noisy the sensor really is, relative to the assumed model, learnt from the fits.
+
+    The inlier band, the kink test and the covariance all rest on the per-point noise. A sensor
+    twice as noisy as assumed loses inliers and breaks lines apart; one quieter keeps needless
+    slack. The median residual ratio of each frame's lines nudges a scale factor (an
+    exponential average in log space), kept within ``LIMITS``.
+    """
+
+    RATE = 0.05
+    LIMITS = (0.5, 4.0)
+
+    def __init__(self) -> None:
+        self.scale = 1.0
+
+    def learn(self, lines: list[LineFit]) -> None:
+        """Update the scale from one frame's lines."""
+        ratios = [line.noise_ratio for line in lines if math.isfinite(line.noise_ratio)]
+        if ratios:
+            step = self.RATE * math.log(float(np.median(ratios)))
+            self.scale = min(max(self.scale * math.exp(step), self.LIMITS[0]), self.LIMITS[1])
+
+
 class WallDetector:
     """Turns sensor frames into wall observations in the robot's base frame."""
 
     def __init__(self, config: DetectorConfig) -> None:
         self.config = config
         self._rng = np.random.default_rng(config.seed)
+        self.noise = {"depth": NoiseLevel(), "scan": NoiseLevel()}
 
     def detect(self, frame: Frame) -> Observations:
         """All walls seen in one frame (an empty list when there are none)."""
         scan = select_scan(frame.points, frame.base_from_sensor, self.config.rows)
         is_scanner = frame.points.shape[0] == 1
-        params = self.config.scan_ransac if is_scanner else self.config.ransac
+        noise = self.noise["scan" if is_scanner else "depth"]
+        base = self.config.scan_ransac if is_scanner else self.config.ransac
+        params = replace(base, noise_scale=base.noise_scale * noise.scale)
+        lines = detect_lines(scan, params, self._rng)
+        noise.learn(lines)
         walls = [
             WallObservation(
                 closest=line.closest,
@@ -55,7 +85,7 @@ class WallDetector:
                 n_points=line.n_points,
                 rms=line.rms,
             )
-            for line in detect_lines(scan, params, self._rng)
+            for line in lines
             if line.offset >= self.config.min_distance
         ]
         return Observations(

@@ -41,6 +41,15 @@ class MapperConfig:
         merge_angle: two walls whose lines differ by less than this angle (rad)...
         merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
             they merge, and the older id survives. 5 cm keeps the two faces of a real wall apart.
+        corner_reach: served ends of two confirmed walls that both lie this close (m) to where
+            their lines cross meet there: each wall's extent overshoots a corner a little, where
+            its detected lines took in points of the other wall.
+        corner_angle: walls closer to parallel than this (rad) have no corner.
+        shadow_angle: a wall within this angle (rad)...
+        shadow_offset: ...and this distance (m) of a wall seen ``shadow_ratio`` times as often,
+            along more than half of its length, is a shadow of it: a line blended across a
+            shallow corner from far away. It is served as tentative.
+        shadow_ratio: see above.
         confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
         confirm_views: ...from this many distinct viewpoints (moved ``view_distance`` or turned
             ``view_angle`` since the last one): one glimpse, however long, is not a wall.
@@ -53,6 +62,11 @@ class MapperConfig:
     pose_cov: Array = field(default_factory=_default_pose_cov)
     merge_angle: float = np.radians(2.0)
     merge_offset: float = 0.05
+    corner_reach: float = 0.4
+    corner_angle: float = np.radians(3.0)
+    shadow_angle: float = np.radians(5.0)
+    shadow_offset: float = 0.10
+    shadow_ratio: float = 3.0
     confirm_obs: int = 3
     confirm_views: int = 2
     keyframe_distance: float = 0.1
@@ -123,6 +137,14 @@ def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     return bool(np.hypot(*(b[:2] - a[:2])) >= distance or turn >= angle)
 
 
+def _end_near(segments: Array, point: Array, reach: float) -> tuple[int, int] | None:
+    """Index of the wall end (first segment's start or last one's end) within reach of point."""
+    ends = ((0, 0), (len(segments) - 1, 1))
+    distance = [float(np.linalg.norm(segments[e] - point)) for e in ends]
+    best = int(np.argmin(distance))
+    return ends[best] if distance[best] <= reach else None
+
+
 def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
     """Whether segment p0-p1 meets the box (Liang-Barsky clipping)."""
     lo, hi = np.array(box[:2]), np.array(box[2:])
@@ -181,10 +203,9 @@ class Wall:
         """Seen often enough, from enough viewpoints, to be served as a wall."""
         return self.n_obs >= config.confirm_obs and self.views >= config.confirm_views
 
-    def to_reply(self, config: MapperConfig) -> dict[str, Any]:
+    def to_reply(self, segments: Array, *, tentative: bool) -> dict[str, Any]:
         """The contract's wall record, in the map frame, with its segments."""
         uv, jac = wall_model.to_map_frame(self.s, self.anchor)
-        segments = self.segments()
         return {
             "id": self.id,
             "u": float(uv[0]),
@@ -195,7 +216,7 @@ class Wall:
             "segments": segments.tolist(),
             "n_obs": self.n_obs,
             "n_views": self.views,
-            "tentative": not self.confirmed(config),
+            "tentative": tentative,
             "first_seen": self.first_seen,
             "last_seen": self.last_seen,
         }
@@ -326,23 +347,72 @@ class WallMap:
         self.next_id += 1
         return wall.id
 
+    def _shadowed(self, wall: Wall) -> bool:
+        """Whether a far better supported wall runs along most of this one (see MapperConfig)."""
+        cfg = self.config
+        n = wall.s / np.linalg.norm(wall.s)
+        length = float(np.ptp(wall.along(wall.ends)))
+        for other in (self.walls[i] for i in self.index.near(wall.ends)):
+            if other is wall or other.n_obs < cfg.shadow_ratio * wall.n_obs:
+                continue
+            m = other.s / np.linalg.norm(other.s)
+            if np.arccos(min(abs(float(n @ m)), 1.0)) > cfg.shadow_angle:
+                continue
+            mine, theirs = other.along(wall.ends), other.along(other.ends)
+            lo, hi = max(mine.min(), theirs.min()), min(mine.max(), theirs.max())
+            if hi - lo <= 0.5 * length:
+                continue
+            middle = other.on_line(np.array([0.5 * (lo + hi)]))[0]
+            if abs(float(n @ (middle - wall_model.foot(wall.s, wall.anchor)))) <= cfg.shadow_offset:
+                return True
+        return False
+
+    def served(self, wall: Wall) -> bool:
+        """Confirmed and not a shadow of another wall: what a reply holds by default."""
+        return wall.confirmed(self.config) and not self._shadowed(wall)
+
     def _selected(self, wall: Wall, query: MapQuery) -> bool:
-        if wall.n_obs < query.min_obs or (not query.tentative and not wall.confirmed(self.config)):
+        if wall.n_obs < query.min_obs or (not query.tentative and not self.served(wall)):
             return False
         if query.since is not None and wall.last_seen < query.since:
             return False
         return query.bbox is None or any(_crosses_box(a, b, query.bbox) for a, b in wall.segments())
 
+    def cornered_segments(self) -> dict[int, Array]:
+        """Every wall's segments, with the ends of served walls that meet at a corner joined."""
+        segments = {w.id: w.segments() for w in self.walls.values()}
+        served = [w for w in self.walls.values() if self.served(w)]
+        sin_min = np.sin(self.config.corner_angle)
+        for a in served:
+            for b in (self.walls[i] for i in sorted(self.index.near(a.ends)) if i > a.id):
+                if not self.served(b):
+                    continue
+                na, nb = a.s / np.linalg.norm(a.s), b.s / np.linalg.norm(b.s)
+                if abs(na[0] * nb[1] - na[1] * nb[0]) < sin_min:
+                    continue
+                corner = np.linalg.solve(
+                    np.array([na, nb]),
+                    [na @ wall_model.foot(a.s, a.anchor), nb @ wall_model.foot(b.s, b.anchor)],
+                )
+                end_a = _end_near(segments[a.id], corner, self.config.corner_reach)
+                end_b = _end_near(segments[b.id], corner, self.config.corner_reach)
+                if end_a is not None and end_b is not None:
+                    segments[a.id][end_a] = segments[b.id][end_b] = corner
+        return segments
+
     def reply(self, query: MapQuery | None = None) -> dict[str, Any]:
         """The contract's map reply (without the schema version, which the codec adds)."""
         query = query or MapQuery()
+        segments = self.cornered_segments()
         body: dict[str, Any] = {
             "frame": "map",
             "frames": self.frames,
             "observations": self.observations,
             "stamp": self.stamp,
             "walls": [
-                w.to_reply(self.config) for w in self.walls.values() if self._selected(w, query)
+                w.to_reply(segments[w.id], tentative=not self.served(w))
+                for w in self.walls.values()
+                if self._selected(w, query)
             ],
             "merges": [list(m) for m in self.merges],
         }
@@ -351,8 +421,18 @@ class WallMap:
         return body
 
     def take_changes(self) -> dict[str, Any]:
-        """Walls changed and ids removed since the last call: the body of a map update."""
-        walls = [self.walls[i].to_reply(self.config) for i in sorted(self.changed)]
+        """Walls changed and ids removed since the last call: the body of a map update.
+
+        A wall's neighbours come along: a change can move the corner they share.
+        """
+        ids = set(self.changed)
+        for i in self.changed:
+            ids |= self.index.near(self.walls[i].ends)
+        segments = self.cornered_segments()
+        walls = [
+            self.walls[i].to_reply(segments[i], tentative=not self.served(self.walls[i]))
+            for i in sorted(ids)
+        ]
         removed = sorted(self.removed)
         self.changed.clear()
         self.removed.clear()

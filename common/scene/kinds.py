@@ -1,0 +1,69 @@
+"""Named benchmark scenes, each hard in one way: a plan recipe and a camera.
+
+``non-manhattan``, ``tilted`` and ``noisy`` share the plan of a seed, so comparing them
+shows the effect of the camera alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .floorplan import FloorPlan, Layout, generate_floorplan
+from .render import Camera
+
+
+@dataclass(frozen=True)
+class SceneKind:
+    """How to make one kind of scene; the seed picks the scene.
+
+    Attributes:
+        name: Short name, as on the benchmark's command line.
+        description: What makes the scene hard, in a phrase.
+        layout: Plan layout (see :func:`generate_floorplan`).
+        glass_fraction: Share of walls that are glass.
+        furniture_per_room: Boxes per room, all below the detector's height band.
+        pillars_per_room: Free-standing 0.3 m pillars per room (four short walls each).
+        camera: Depth camera and mount.
+    """
+
+    name: str
+    description: str
+    layout: Layout = "rooms"
+    glass_fraction: float = 0.15
+    furniture_per_room: int = 2
+    pillars_per_room: int = 0
+    camera: Camera = field(default_factory=Camera)
+
+    def plan(self, seed: int) -> FloorPlan:
+        """The plan of this kind for ``seed``; the same seed always gives the same plan."""
+        return generate_floorplan(
+            seed,
+            layout=self.layout,
+            glass_fraction=self.glass_fraction,
+            furniture_per_room=self.furniture_per_room,
+            pillars_per_room=self.pillars_per_room,
+        )
+
+
+SCENE_KINDS: dict[str, SceneKind] = {
+    kind.name: kind
+    for kind in (
+        SceneKind("non-manhattan", "three rooms, kinked walls at any angle (the default plan)"),
+        SceneKind("corridor", "long kinked corridor, narrow doors, small side rooms", "corridor"),
+        SceneKind("glass", "45 % of the walls are glass", glass_fraction=0.45),
+        SceneKind(
+            "clutter",
+            "6 boxes per room below the band, a 0.3 m pillar per room",
+            furniture_per_room=6,
+            pillars_per_room=1,
+        ),
+        SceneKind(
+            "tilted", "default plan, camera tilted up 8 degrees", camera=Camera(tilt_deg=8.0)
+        ),
+        SceneKind(
+            "noisy",
+            "default plan, twice the Kinect depth noise",
+            camera=Camera(noise_k=2 * Camera().noise_k),
+        ),
+    )
+}
