@@ -72,14 +72,14 @@ class Extent:
             return []
         threshold = min(MIN_HITS, int(self.counts.max()))
         seen = np.flatnonzero(self.counts >= threshold)
-        runs: list[list[float]] = []
-        for index in seen:
-            start, end = (self.first + index) * BIN, (self.first + index + 1) * BIN
-            if runs and start - runs[-1][1] <= MAX_GAP:
-                runs[-1][1] = end
-            else:
-                runs.append([start, end])
-        return [(a, b) for a, b in runs]
+        # A new segment starts wherever the gap to the previous seen bin exceeds MAX_GAP.
+        breaks = np.flatnonzero(np.diff(seen) * BIN - BIN > MAX_GAP + 1e-9) + 1
+        starts = seen[np.concatenate(([0], breaks))]
+        ends = seen[np.concatenate((breaks - 1, [len(seen) - 1]))] + 1
+        return [
+            ((self.first + a) * BIN, (self.first + b) * BIN)
+            for a, b in zip(starts.tolist(), ends.tolist(), strict=True)
+        ]
 
     def to_json(self) -> dict[str, Any]:
         """For the state file."""

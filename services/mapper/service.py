@@ -69,6 +69,7 @@ class MapperCore:
         self.lock = threading.Condition()
         self.dirty = False
         self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict()
+        self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
 
     def count(self, run: str, *, integrated: bool) -> Progress:
         """Record one processed frame of a run; returns the run's new progress."""
@@ -84,17 +85,31 @@ class MapperCore:
             self.runs.popitem(last=False)
         return new
 
-    def reply(self, query: MapQuery) -> dict[str, object]:
-        """The map reply plus the mapper's counters."""
-        with self.lock:
-            body = self.map.reply(query)
-            counts = self.stats.snapshot()
-        body["dropped"] = counts.get("dropped", 0)
-        body["dropped_reasons"] = {
-            reason: counts.get(f"dropped.{reason}", 0) for reason in DROP_REASONS.values()
+    def reply(self, query: MapQuery, fmt: str) -> bytes:
+        """The encoded map reply plus the mapper's counters, built once per map state.
+
+        Many clients polling a map that does not change then cost one encoding between them.
+        """
+        counts = self.stats.snapshot()
+        extra: dict[str, object] = {
+            "dropped": counts.get("dropped", 0),
+            "dropped_reasons": {
+                reason: counts.get(f"dropped.{reason}", 0) for reason in DROP_REASONS.values()
+            },
+            "refused": counts.get("refused", 0),
         }
-        body["refused"] = counts.get("refused", 0)
-        return body
+        with self.lock:
+            state = (self.map.version, len(self.map.merges), json.dumps(extra))
+            if self._replies and next(iter(self._replies))[0] != state:
+                self._replies.clear()
+            key = (state, query, fmt)
+            if key not in self._replies:
+                body = {**self.map.reply(query), **extra}
+                if fmt == "json":
+                    self._replies[key] = json.dumps({"v": 1, **body}).encode()
+                else:
+                    self._replies[key] = encode(body)
+            return self._replies[key]
 
 
 def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) -> Stats:
@@ -265,10 +280,9 @@ def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> 
             if fmt not in ("msgpack", "json"):
                 query.reply_err(f"format must be msgpack or json, got {fmt!r}")
                 continue
-            body = core.reply(selection)
+            payload = core.reply(selection, fmt)
             if fmt == "json":
-                payload = json.dumps({"v": 1, **body}).encode()
                 query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
             else:
-                query.reply(query.key_expr, encode(body))
+                query.reply(query.key_expr, payload)
         core.stats.add("queries")

@@ -9,7 +9,8 @@ same wall.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +23,9 @@ from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.wall_index import WallIndex
 
 Array = NDArray[np.float64]
+
+
+NEAR_LINE = 1.0  # m: farther lines are never candidates for an observation
 
 
 def _default_pose_cov() -> Array:
@@ -139,9 +143,10 @@ def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
 
 def _end_near(segments: Array, point: Array, reach: float) -> tuple[int, int] | None:
     """Index of the wall end (first segment's start or last one's end) within reach of point."""
+    px, py = float(point[0]), float(point[1])
     ends = ((0, 0), (len(segments) - 1, 1))
-    distance = [float(np.linalg.norm(segments[e] - point)) for e in ends]
-    best = int(np.argmin(distance))
+    distance = [math.hypot(segments[e][0] - px, segments[e][1] - py) for e in ends]
+    best = 0 if distance[0] <= distance[1] else 1
     return ends[best] if distance[best] <= reach else None
 
 
@@ -179,14 +184,23 @@ class Wall:
     views: int
     last_view: Array  # (x, y, yaw) of the last distinct viewpoint
 
+    def __post_init__(self) -> None:
+        self.set_state(self.s, self.p)
+
+    def set_state(self, s: Array, p: Array) -> None:
+        """New EKF state; the line's foot point, direction and normal follow."""
+        self.s, self.p = s, p
+        self.foot = wall_model.foot(s, self.anchor)
+        self.direction = wall_model.direction(s)
+        self.normal = s / np.linalg.norm(s)
+
     def along(self, points: Array) -> Array:
         """Positions of map points along the wall, from its foot point."""
-        return (points - wall_model.foot(self.s, self.anchor)) @ wall_model.direction(self.s)
+        return (points - self.foot) @ self.direction
 
     def on_line(self, t: Array) -> Array:
         """Map points at positions ``t`` along the wall."""
-        foot, d = wall_model.foot(self.s, self.anchor), wall_model.direction(self.s)
-        return foot + np.outer(t, d)
+        return self.foot + np.outer(t, self.direction)
 
     def extend(self, points: Array) -> None:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
@@ -237,6 +251,7 @@ class WallMap:
         self.changed: set[int] = set()  # since the last take_changes()
         self.removed: set[int] = set()
         self.index = WallIndex(margin=self.config.max_extent_gap)
+        self.version = 0  # grows with every integrated frame: replies can be cached by it
 
     def restore(self, wall: Wall) -> None:
         """Put back a wall read from the state file."""
@@ -249,6 +264,7 @@ class WallMap:
         pose_cov = pose.cov if pose.cov is not None else self.config.pose_cov
         ids = [self._integrate_one(obs, pose_vec, pose_cov, frame.stamp) for obs in frame.walls]
         self.frames += 1
+        self.version += 1
         self.observations += len(ids)
         self.stamp = frame.stamp if self.stamp is None else max(self.stamp, frame.stamp)
         self._keep_keyframe(pose)
@@ -277,7 +293,7 @@ class WallMap:
         if best is None:
             return self._new_wall(obs, pose, pose_cov, seg, stamp)
         _, wall, innov = best
-        wall.s, wall.p = ekf.update(wall.s, wall.p, innov)
+        wall.set_state(*ekf.update(wall.s, wall.p, innov))
         wall.extend(seg)
         self.index.file(wall.id, wall.ends)
         wall.extent.add(seg)
@@ -295,7 +311,7 @@ class WallMap:
         for other in self._near(wall.ends, max_gap=0.0):
             if other.id in self.walls and other is not wall and self._same_wall(wall, other):
                 keep, gone = (wall, other) if wall.id < other.id else (other, wall)
-                keep.s, keep.p = ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor)
+                keep.set_state(*ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor))
                 keep.extend(gone.ends)
                 keep.extent.absorb(gone.extent)
                 keep.n_obs += gone.n_obs
@@ -314,25 +330,37 @@ class WallMap:
 
     def _same_wall(self, a: Wall, b: Wall) -> bool:
         """Lines within ``merge_angle`` and ``merge_offset`` where the extents overlap."""
-        na, nb = a.s / np.linalg.norm(a.s), b.s / np.linalg.norm(b.s)
+        na, nb = a.normal, b.normal
         if np.arccos(min(abs(float(na @ nb)), 1.0)) > self.config.merge_angle:
             return False
         ta, tb = a.along(a.ends), a.along(b.ends)
         middle = 0.5 * (max(ta.min(), tb.min()) + min(ta.max(), tb.max()))
         point = a.on_line(np.array([middle]))[0]
-        offset = abs(float(nb @ (point - wall_model.foot(b.s, b.anchor))))
+        offset = abs(float(nb @ (point - b.foot)))
         return offset <= self.config.merge_offset
 
     def _near(self, seg: Array, max_gap: float | None = None) -> list[Wall]:
-        """Walls whose extent comes within ``max_gap`` (default ``max_extent_gap``) of a segment."""
+        """Walls near a segment, along the wall and across it.
+
+        Their extent comes within ``max_gap`` (default ``max_extent_gap``) of the segment along
+        the wall, and their line within ``NEAR_LINE`` of its middle: farther lines could only
+        pass the association gate with metres of uncertainty, and leaving them out spares an
+        innovation each. All candidates are checked at once.
+        """
+        walls = [self.walls[i] for i in sorted(self.index.near(seg))]
+        if not walls:
+            return []
         limit = self.config.max_extent_gap if max_gap is None else max_gap
-        near = []
-        for wall in (self.walls[i] for i in sorted(self.index.near(seg))):
-            t_obs, t_wall = wall.along(seg), wall.along(wall.ends)
-            gap = max(t_obs.min() - t_wall.max(), t_wall.min() - t_obs.max())
-            if gap <= limit:
-                near.append(wall)
-        return near
+        feet = np.array([w.foot for w in walls])
+        dirs = np.array([w.direction for w in walls])
+        normals = np.array([w.normal for w in walls])
+        ends = np.array([w.ends for w in walls])
+        t_obs = np.einsum("kpd,kd->kp", seg[None] - feet[:, None], dirs)
+        t_wall = np.einsum("kpd,kd->kp", ends - feet[:, None], dirs)
+        gap = np.maximum(t_obs.min(1) - t_wall.max(1), t_wall.min(1) - t_obs.max(1))
+        offset = np.abs(np.einsum("kd,kd->k", seg.mean(axis=0) - feet, normals))
+        keep = (gap <= limit) & (offset <= NEAR_LINE)
+        return [w for w, k in zip(walls, keep, strict=True) if k]
 
     def _new_wall(
         self, obs: WallObservation, pose: Array, pose_cov: Array, seg: Array, stamp: float
@@ -350,12 +378,12 @@ class WallMap:
     def _shadowed(self, wall: Wall) -> bool:
         """Whether a far better supported wall runs along most of this one (see MapperConfig)."""
         cfg = self.config
-        n = wall.s / np.linalg.norm(wall.s)
+        n = wall.normal
         length = float(np.ptp(wall.along(wall.ends)))
         for other in (self.walls[i] for i in self.index.near(wall.ends)):
             if other is wall or other.n_obs < cfg.shadow_ratio * wall.n_obs:
                 continue
-            m = other.s / np.linalg.norm(other.s)
+            m = other.normal
             if np.arccos(min(abs(float(n @ m)), 1.0)) > cfg.shadow_angle:
                 continue
             mine, theirs = other.along(wall.ends), other.along(other.ends)
@@ -363,7 +391,7 @@ class WallMap:
             if hi - lo <= 0.5 * length:
                 continue
             middle = other.on_line(np.array([0.5 * (lo + hi)]))[0]
-            if abs(float(n @ (middle - wall_model.foot(wall.s, wall.anchor)))) <= cfg.shadow_offset:
+            if abs(float(n @ (middle - wall.foot))) <= cfg.shadow_offset:
                 return True
         return False
 
@@ -371,49 +399,66 @@ class WallMap:
         """Confirmed and not a shadow of another wall: what a reply holds by default."""
         return wall.confirmed(self.config) and not self._shadowed(wall)
 
-    def _selected(self, wall: Wall, query: MapQuery) -> bool:
-        if wall.n_obs < query.min_obs or (not query.tentative and not self.served(wall)):
+    def _selected(self, wall: Wall, query: MapQuery, served: dict[int, bool]) -> bool:
+        served[wall.id] = self.served(wall)
+        if wall.n_obs < query.min_obs or (not query.tentative and not served[wall.id]):
             return False
         if query.since is not None and wall.last_seen < query.since:
             return False
         return query.bbox is None or any(_crosses_box(a, b, query.bbox) for a, b in wall.segments())
 
-    def cornered_segments(self) -> dict[int, Array]:
-        """Every wall's segments, with the ends of served walls that meet at a corner joined."""
-        segments = {w.id: w.segments() for w in self.walls.values()}
-        served = [w for w in self.walls.values() if self.served(w)]
+    def cornered_segments(self, ids: Iterable[int], served: dict[int, bool]) -> dict[int, Array]:
+        """The segments of walls ``ids``, with their ends joined at corners.
+
+        An end of a served wall that meets a served neighbour's end at a corner moves onto the
+        corner. ``served`` caches :meth:`served` and comes back filled for ``ids``.
+        """
+        raw: dict[int, Array] = {}
+
+        def segments(wall: Wall) -> Array:
+            if wall.id not in raw:
+                raw[wall.id] = wall.segments()
+            return raw[wall.id]
+
+        def is_served(wall: Wall) -> bool:
+            if wall.id not in served:
+                served[wall.id] = self.served(wall)
+            return served[wall.id]
+
         sin_min = np.sin(self.config.corner_angle)
-        for a in served:
-            for b in (self.walls[i] for i in sorted(self.index.near(a.ends)) if i > a.id):
-                if not self.served(b):
+        out = {}
+        for wall_id in ids:
+            a = self.walls[wall_id]
+            mine = segments(a).copy()
+            out[wall_id] = mine
+            if not is_served(a):
+                continue
+            for b in (self.walls[i] for i in sorted(self.index.near(a.ends)) if i != a.id):
+                if not is_served(b):
                     continue
-                na, nb = a.s / np.linalg.norm(a.s), b.s / np.linalg.norm(b.s)
-                if abs(na[0] * nb[1] - na[1] * nb[0]) < sin_min:
+                if abs(a.normal[0] * b.normal[1] - a.normal[1] * b.normal[0]) < sin_min:
                     continue
                 corner = np.linalg.solve(
-                    np.array([na, nb]),
-                    [na @ wall_model.foot(a.s, a.anchor), nb @ wall_model.foot(b.s, b.anchor)],
+                    np.array([a.normal, b.normal]), [a.normal @ a.foot, b.normal @ b.foot]
                 )
-                end_a = _end_near(segments[a.id], corner, self.config.corner_reach)
-                end_b = _end_near(segments[b.id], corner, self.config.corner_reach)
+                end_a = _end_near(segments(a), corner, self.config.corner_reach)
+                end_b = _end_near(segments(b), corner, self.config.corner_reach)
                 if end_a is not None and end_b is not None:
-                    segments[a.id][end_a] = segments[b.id][end_b] = corner
-        return segments
+                    mine[end_a] = corner
+        return out
 
     def reply(self, query: MapQuery | None = None) -> dict[str, Any]:
         """The contract's map reply (without the schema version, which the codec adds)."""
         query = query or MapQuery()
-        segments = self.cornered_segments()
+        served: dict[int, bool] = {}
+        chosen = [w.id for w in self.walls.values() if self._selected(w, query, served)]
+        segments = self.cornered_segments(chosen, served)
         body: dict[str, Any] = {
             "frame": "map",
             "frames": self.frames,
             "observations": self.observations,
             "stamp": self.stamp,
-            "walls": [
-                w.to_reply(segments[w.id], tentative=not self.served(w))
-                for w in self.walls.values()
-                if self._selected(w, query)
-            ],
+            "walls": [self.walls[i].to_reply(segments[i], tentative=not served[i]) for i in chosen],
             "merges": [list(m) for m in self.merges],
         }
         if query.trajectory:
@@ -428,11 +473,9 @@ class WallMap:
         ids = set(self.changed)
         for i in self.changed:
             ids |= self.index.near(self.walls[i].ends)
-        segments = self.cornered_segments()
-        walls = [
-            self.walls[i].to_reply(segments[i], tentative=not self.served(self.walls[i]))
-            for i in sorted(ids)
-        ]
+        served: dict[int, bool] = {}
+        segments = self.cornered_segments(sorted(ids), served)
+        walls = [self.walls[i].to_reply(segments[i], tentative=not served[i]) for i in sorted(ids)]
         removed = sorted(self.removed)
         self.changed.clear()
         self.removed.clear()

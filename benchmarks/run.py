@@ -1,0 +1,27 @@
+"""`make bench`: the performance benchmarks, one after the other, each printing its table.
+
+Accuracy (benchmarks/accuracy.py) and the row choice (benchmarks/row_choice.py) take minutes and
+are run on their own; see docs/accuracy.md and docs/detector.md.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SCRIPTS = [
+    ("association + EKF update per observation", ["mapper_scaling.py"]),
+    ("map/walls query latency, 10 concurrent clients", ["query_latency.py"]),
+]
+
+
+def main() -> None:
+    for title, command in SCRIPTS:
+        print(f"\n== {title}", flush=True)
+        subprocess.run([sys.executable, *command], cwd=HERE, check=True)
+
+
+if __name__ == "__main__":
+    main()
