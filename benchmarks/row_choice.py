@@ -14,10 +14,10 @@ import tempfile
 from pathlib import Path
 
 from wallmap.common.evaluation import evaluate_map
+from wallmap.common.scan_row import RowSelection
 from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.offline import map_bag, walls
 from wallmap.services.detector.detector import DetectorConfig
-from wallmap.services.detector.scan_row import RowSelection
 
 CHOICES = {
     "band 1.3-2.1 m (default)": RowSelection(mode="band", band=(1.3, 2.1)),

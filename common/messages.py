@@ -80,6 +80,14 @@ def _covariance(value: Any, n: int, key: str) -> Array:
     return cov
 
 
+def _sensor(m: dict[str, Any]) -> str:
+    value = _str(m, "sensor", "depth")
+    if value not in ("depth", "scan"):
+        msg = f"field 'sensor' must be depth or scan, got {value!r}"
+        raise MessageError(msg)
+    return value
+
+
 def _require_map(m: object) -> dict[str, Any]:
     if not isinstance(m, dict):
         msg = f"expected a map, got {type(m).__name__}"
@@ -142,7 +150,9 @@ class Frame:
     """One sensor frame: an organized cloud (h, w, 3) in the sensor frame and the sensor's mount.
 
     ``run`` names the player run and ``seq`` numbers its frames from 0, so the mapper can
-    acknowledge them and a player in ``--fast`` mode can wait.
+    acknowledge them and a player in ``--fast`` mode can wait. ``sensor`` says whose noise the
+    points carry: a depth camera's (``depth``, even when the player sent only the chosen row) or
+    a 2-D scanner's (``scan``).
     """
 
     run: str
@@ -151,6 +161,7 @@ class Frame:
     frame_id: str
     points: NDArray[np.float32]
     base_from_sensor: Array
+    sensor: str = "depth"
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding (the points go as raw bytes)."""
@@ -161,6 +172,7 @@ class Frame:
             "frame_id": self.frame_id,
             "points": self.points,
             "base_from_sensor": self.base_from_sensor,
+            "sensor": self.sensor,
         }
 
     @classmethod
@@ -181,6 +193,7 @@ class Frame:
             frame_id=_str(m, "frame_id"),
             points=points,
             base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
+            sensor=_sensor(m),
         )
 
 

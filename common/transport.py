@@ -162,6 +162,11 @@ class Keys:
         return f"{self.prefix}/walls/observations"
 
     @property
+    def detector_rows(self) -> str:
+        """Queryable of the detector: the row selection, so players send only that row."""
+        return f"{self.prefix}/detector/rows"
+
+    @property
     def map_walls(self) -> str:
         """Queryable: the current wall map (the contract's map key)."""
         return f"{self.prefix}/map/walls"

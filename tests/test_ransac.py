@@ -5,7 +5,7 @@ import pytest
 
 from wallmap.common.line_fit import fit_line
 from wallmap.common.ransac import RansacParams, detect_lines, split_at_nans
-from wallmap.services.detector.scan_row import RowSelection, band_scan, select_scan
+from wallmap.common.scan_row import RowSelection, select_scan
 
 
 def test_split_at_nans_gives_runs_of_finite_points():
@@ -95,7 +95,7 @@ def test_band_scan_takes_points_inside_the_height_band_per_column():
     pts[..., 1] = rows[:, None]
     pts[..., 2] = 3.0
     pts[3, 2] = np.nan  # the centre pixel has no return
-    xy = band_scan(pts, base_from_sensor, (1.3, 2.1))
+    xy = select_scan(pts, base_from_sensor, RowSelection(band=(1.3, 2.1)))
     # Heights are 1 - y: rows with y in [-1.1, -0.3] qualify: y = -0.5 (height 1.5), -1.0 (2.0).
     assert np.allclose(xy[:, 0], 3.1)
     np.testing.assert_allclose(xy[:, 1], -cols)

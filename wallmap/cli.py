@@ -16,6 +16,7 @@ from typing import NoReturn
 from wallmap import __version__
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
+from wallmap.common.scan_row import RowSelection
 from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
@@ -33,7 +34,6 @@ from wallmap.map_client import QueryError, fetch_map, format_table, to_json
 from wallmap.plot import write_picture
 from wallmap.services.detector import service as detector_service
 from wallmap.services.detector.detector import DetectorConfig
-from wallmap.services.detector.scan_row import RowSelection
 from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import FORMATS as POSE_FORMATS
 from wallmap.services.mapper.pose_input import make_pose_input
@@ -122,6 +122,7 @@ def _cmd_player(args: argparse.Namespace) -> int:
         if args.fast
         else (),
         wait_timeout=args.wait_timeout,
+        whole_clouds=args.whole_clouds,
     )
     settings = settings_from_args(args, wait_for_router=args.wait_timeout)
     result = player_service.run(settings, player, stop_on_signals())
@@ -245,6 +246,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_arguments(p)
     p.add_argument(
         "--wait-timeout", type=_positive, default=30.0, help="wait for router and services (s)"
+    )
+    p.add_argument(
+        "--whole-clouds",
+        action="store_true",
+        help="send whole clouds, not only the row the detector asks for (e.g. to record them)",
     )
     p.add_argument(
         "--wait-for",

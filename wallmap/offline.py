@@ -11,7 +11,7 @@ from typing import Any
 from wallmap.common.messages import Frame
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
-from wallmap.services.player.bag_source import BagSource
+from wallmap.services.player.bag_source import LASERSCAN, BagSource
 
 
 def map_bag(
@@ -25,11 +25,18 @@ def map_bag(
     wall_detector = WallDetector(detector or DetectorConfig())
     wall_map = WallMap(mapper)
     with BagSource(bag, pose_source=pose_source) as source:
+        sensor = "scan" if source.sensor_type == LASERSCAN else "depth"
         for seq, (frame, pose) in enumerate(source.frames()):
             if pose is None:
                 continue
             message = Frame(
-                "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor
+                "offline",
+                seq,
+                frame.stamp,
+                frame.frame_id,
+                frame.points,
+                frame.T_base_sensor,
+                sensor,
             )
             observations = wall_detector.detect(message)
             wall_map.integrate(observations, pose)

@@ -10,7 +10,7 @@ import numpy as np
 from wallmap.common.line_fit import LineFit
 from wallmap.common.messages import Frame, Observations, WallObservation
 from wallmap.common.ransac import RansacParams, detect_lines
-from wallmap.services.detector.scan_row import RowSelection, select_scan
+from wallmap.common.scan_row import RowSelection, select_scan
 
 SCANNER = RansacParams(noise_k=0.0, sigma_floor=0.01, inlier_min=0.03)  # a 2-D lidar, ~1 cm
 
@@ -22,8 +22,8 @@ class DetectorConfig:
     Attributes:
         rows: how the scan row is chosen from the cloud.
         ransac: the line search in a depth camera's row (noise growing with range squared).
-        scan_ransac: the line search in a 2-D scanner's row (frames of one row): a lidar's
-            noise is about constant with range.
+        scan_ransac: the line search in a 2-D scanner's row: a lidar's noise is about
+            constant with range.
         min_distance: walls whose line passes closer than this to the robot are refused (m):
             nothing real is that close, and (u, v) degenerates there.
         seed: seed of the RANSAC sampler, so a run can be repeated exactly.
@@ -70,8 +70,8 @@ class WallDetector:
     def detect(self, frame: Frame) -> Observations:
         """All walls seen in one frame (an empty list when there are none)."""
         scan = select_scan(frame.points, frame.base_from_sensor, self.config.rows)
-        is_scanner = frame.points.shape[0] == 1
-        noise = self.noise["scan" if is_scanner else "depth"]
+        is_scanner = frame.sensor == "scan"
+        noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = replace(base, noise_scale=base.noise_scale * noise.scale)
         lines = detect_lines(scan, params, self._rng)

@@ -11,7 +11,7 @@ import threading
 
 import zenoh
 
-from wallmap.common.codec import MessageError
+from wallmap.common.codec import MessageError, encode
 from wallmap.common.messages import pack, unpack_frame
 from wallmap.common.runtime import Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -34,18 +34,32 @@ def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) 
         subscriber = session.declare_subscriber(
             keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
         )
+        rows = session.declare_queryable(keys.detector_rows)
         token = session.liveliness().declare_token(keys.health("detector"))
-        worker = threading.Thread(
-            target=_work, args=(subscriber.handler, detector, publisher, stats), daemon=True
-        )
-        worker.start()
+        workers = [
+            threading.Thread(
+                target=_work, args=(subscriber.handler, detector, publisher, stats), daemon=True
+            ),
+            threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True),
+        ]
+        for worker in workers:
+            worker.start()
         log.info("ready: %s -> %s (rows: %s)", keys.frames, keys.observations, config.rows)
         stop.wait()
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
         subscriber.undeclare()
-        worker.join(timeout=5.0)
+        rows.undeclare()
+        for worker in workers:
+            worker.join(timeout=5.0)
     return stats
+
+
+def _answer_rows(channel: zenoh.handlers.Handler[zenoh.Query], config: DetectorConfig) -> None:
+    """Tell players which row to send: they then send that row only, not whole clouds."""
+    for query in drain(channel):
+        with query:
+            query.reply(query.key_expr, encode(config.rows.to_map()))
 
 
 def _work(

@@ -17,11 +17,12 @@ from pathlib import Path
 
 import zenoh
 
-from wallmap.common.codec import MessageError
+from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import Frame, pack, unpack_progress
 from wallmap.common.runtime import setup_logging
+from wallmap.common.scan_row import RowSelection, select_points
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.player.bag_source import BagSource
+from wallmap.services.player.bag_source import LASERSCAN, BagSource
 from wallmap.services.player.errors import PlayerError
 
 POLL = 0.001  # s between checks of the acknowledgement channel
@@ -41,6 +42,7 @@ class PlayerSettings:
         wait_for: services whose liveliness to wait for before playing.
         wait_timeout: how long to wait for them (s).
         stall_timeout: with ``fast``, how long without an acknowledgement is a failure (s).
+        whole_clouds: send whole clouds instead of only the row the detector asks for.
     """
 
     bag: Path
@@ -52,6 +54,7 @@ class PlayerSettings:
     wait_for: tuple[str, ...] = ()
     wait_timeout: float = 30.0
     stall_timeout: float = 30.0
+    whole_clouds: bool = False
 
 
 @dataclass(frozen=True)
@@ -90,6 +93,17 @@ def _wait_for_services(
             raise PlayerError(msg)
         if missing:
             time.sleep(0.1)
+
+
+def _ask_rows(session: zenoh.Session, keys: Keys) -> RowSelection | None:
+    """The detector's row selection, or None (send whole clouds) when no detector answers."""
+    for reply in session.get(keys.detector_rows, timeout=2.0):
+        if reply.ok is not None:
+            try:
+                return RowSelection.from_map(decode(reply.ok.payload.to_bytes()))
+            except MessageError:
+                return None
+    return None
 
 
 class _Acks:
@@ -172,6 +186,11 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             )
             acks = _Acks(progress_sub.handler, run_id)
             _wait_for_services(session, keys, player.wait_for, player.wait_timeout)
+            sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
+            rows = None if player.whole_clouds or sensor == "scan" else _ask_rows(session, keys)
+            log.info(
+                "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
+            )
             bar = _ProgressLine(bag.frame_count)
             published = poses = 0
             start_wall = time.monotonic()
@@ -188,13 +207,17 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 if pose is not None:
                     pose_pub.put(pack(pose))
                     poses += 1
+                points = frame.points
+                if rows is not None:
+                    points = select_points(points, frame.T_base_sensor, rows)[None]
                 message = Frame(
                     run_id,
                     published,
                     frame.stamp,
                     frame.frame_id,
-                    frame.points,
+                    points,
                     frame.T_base_sensor,
+                    sensor,
                 )
                 frames_pub.put(pack(message))
                 published += 1

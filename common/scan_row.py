@@ -15,10 +15,12 @@ A frame with a single row is a 2-D scanner's scan and is used as it is.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from wallmap.common.codec import MessageError
 
 Array = NDArray[np.float64]
 
@@ -37,6 +39,24 @@ class RowSelection:
     band: tuple[float, float] = (1.3, 2.1)
     row_fraction: float = 0.25
 
+    def to_map(self) -> dict[str, Any]:
+        """What the detector tells players, so they send this row only."""
+        return {"mode": self.mode, "band": list(self.band), "row_fraction": self.row_fraction}
+
+    @classmethod
+    def from_map(cls, m: dict[str, Any]) -> RowSelection:
+        """Read what a detector said; MessageError when it makes no sense."""
+        try:
+            mode, (low, high), fraction = m["mode"], m["band"], float(m["row_fraction"])
+            band = (float(low), float(high))
+        except (KeyError, TypeError, ValueError) as err:
+            msg = f"malformed row selection: {err}"
+            raise MessageError(msg) from err
+        if mode not in ("band", "row") or not low < high or not 0.0 <= fraction <= 1.0:
+            msg = f"row selection out of range: {m!r}"
+            raise MessageError(msg)
+        return cls(mode, band, fraction)
+
 
 def _to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
     xy = points.astype(np.float64) @ base_from_sensor[:2, :3].T + base_from_sensor[:2, 3]
@@ -44,28 +64,36 @@ def _to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
     return xy
 
 
-def band_scan(
+def band_points(
     points: NDArray[np.float32], base_from_sensor: Array, band: tuple[float, float]
-) -> Array:
-    """Per column, the point nearest the middle of the height band, as (x, y); NaN where none."""
+) -> NDArray[np.float32]:
+    """Per column, the point nearest the middle of the height band (sensor frame); NaN if none."""
     low, high = band
-    height = points @ base_from_sensor[2, :3].astype(np.float32) + np.float32(
-        base_from_sensor[2, 3]
-    )
+    row_z = base_from_sensor[2].astype(np.float32)
+    height = points @ row_z[:3] + row_z[3]
     inside = (height >= low) & (height <= high)  # NaN compares False
     cost = np.where(inside, np.abs(height - 0.5 * (low + high)), np.inf)
     best = np.argmin(cost, axis=0)
     columns = np.arange(points.shape[1])
-    xy = _to_base_xy(points[best, columns], base_from_sensor)
-    xy[~inside[best, columns]] = np.nan
-    return xy
+    chosen = points[best, columns]
+    chosen[~inside[best, columns]] = np.nan
+    return chosen
+
+
+def select_points(
+    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+) -> NDArray[np.float32]:
+    """The scan row (columns x 3, sensor frame, NaN for no point) chosen from an organized cloud.
+
+    The player applies it too, so that only this row travels (see RowSelection.to_map).
+    """
+    if points.shape[0] == 1:
+        return points[0]
+    if how.mode == "row":
+        return points[round(how.row_fraction * (points.shape[0] - 1))]
+    return band_points(points, base_from_sensor, how.band)
 
 
 def select_scan(points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection) -> Array:
-    """The scan row (columns x 2, base frame, NaN for no point) chosen from an organized cloud."""
-    if points.shape[0] == 1:
-        return _to_base_xy(points[0], base_from_sensor)
-    if how.mode == "row":
-        row = round(how.row_fraction * (points.shape[0] - 1))
-        return _to_base_xy(points[row], base_from_sensor)
-    return band_scan(points, base_from_sensor, how.band)
+    """The scan row as 2-D points in the base frame (columns x 2, NaN for no point)."""
+    return _to_base_xy(select_points(points, base_from_sensor, how), base_from_sensor)
