@@ -1,0 +1,86 @@
+"""End to end against the floor: a 30 Hz 640x480 PointCloud2 bag through the separate services.
+
+The floor is what `rosbags` alone takes to read and deserialize the same clouds; the pipeline is
+`wallmap player --fast` feeding a detector and a mapper (separate processes, a real router),
+timed from the player's first frame to the mapper's acknowledgement of the last. Both numbers
+come from the same run on the same bag, so the ratio is fair on a busy machine.
+
+    .venv/bin/python benchmarks/end_to_end.py [--frames 90] [--whole-clouds]
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from rosbags.highlevel import AnyReader
+
+from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.launcher import free_loopback_port
+
+
+def read_floor(bag: Path) -> float:
+    """Seconds to read and deserialize every point cloud, and nothing else."""
+    start = time.perf_counter()
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/PointCloud2"]
+        for conn, _, raw in reader.messages(connections=conns):
+            reader.deserialize(raw, conn.msgtype)
+    return time.perf_counter() - start
+
+
+def pipeline(bag: Path, whole_clouds: bool) -> tuple[float, int]:
+    """Seconds the player reports for the bag with --fast, and the frames the mapper integrated."""
+    endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
+    wallmap = [sys.executable, "-m", "wallmap"]
+    zenoh = ["--connect", endpoint]
+    procs = [subprocess.Popen([*wallmap, "router", "--listen", endpoint])]
+    procs += [subprocess.Popen([*wallmap, name, *zenoh]) for name in ("mapper", "detector")]
+    try:
+        extra = ["--whole-clouds"] if whole_clouds else []
+        out = subprocess.run(
+            [*wallmap, "player", str(bag), "--fast", *extra, *zenoh],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            proc.wait()
+    found = re.search(r"in ([\d.]+) s .* integrated (\d+)", out)
+    if not found:
+        raise RuntimeError(out)
+    return float(found[1]), int(found[2])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=90)
+    parser.add_argument("--whole-clouds", action="store_true", help="do not negotiate rows")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / "vga.bag"
+        info = write_scene_bag(
+            bag, seed=7, n_frames=args.frames, fmt="ros1", sensor="pointcloud",
+            camera=Camera(width=640, height=480), rate_hz=30.0,
+        )  # fmt: skip
+        size = bag.stat().st_size / 1e6
+        floor = read_floor(bag)
+        seconds, integrated = pipeline(bag, args.whole_clouds)
+    sent = "whole clouds" if args.whole_clouds else "one row per frame"
+    header = f"{'frames':>7} {'bag MB':>7} {'floor s':>8} {'pipeline s':>11} {'floor/pipeline':>15}"
+    print(f"{header}  sent")
+    print(
+        f"{info.n_frames:>7} {size:>7.0f} {floor:>8.2f} {seconds:>11.2f}"
+        f" {floor / seconds:>15.2f}  {sent} ({integrated} frames integrated)"
+    )
+
+
+if __name__ == "__main__":
+    main()
