@@ -11,6 +11,7 @@ among those whose Mahalanobis distance passes a chi-square gate.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +21,7 @@ from wallmap.common import wall_model
 
 Array = NDArray[np.float64]
 
+_EYE2 = np.eye(2)
 CHI2_2DOF_999 = 13.815510557964274  # 99.9 % gate of a chi-square with 2 degrees of freedom
 
 
@@ -42,6 +44,13 @@ class Innovation:
     log_likelihood: float
 
 
+def _inverse_and_det(m: Array) -> tuple[Array, float]:
+    """Inverse and determinant of a 2x2 matrix, in closed form (hot path)."""
+    a, b, c, d = float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1])
+    det = a * d - b * c
+    return np.array([[d, -b], [-c, a]]) / det, det
+
+
 def innovation(
     s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array
 ) -> Innovation:
@@ -50,17 +59,17 @@ def innovation(
     hp = wall_model.jacobian_pose(s, anchor, pose)
     cov = h @ p @ h.T + r + hp @ pose_cov @ hp.T
     residual = z - wall_model.predict(s, anchor, pose)
-    m2 = float(residual @ np.linalg.solve(cov, residual))
-    log_det = float(np.log(np.linalg.det(cov)))
-    return Innovation(residual, cov, h, m2, -0.5 * (m2 + log_det) - np.log(2.0 * np.pi))
+    inverse, det = _inverse_and_det(cov)
+    m2 = float(residual @ inverse @ residual)
+    return Innovation(residual, cov, h, m2, -0.5 * (m2 + math.log(det)) - math.log(2.0 * math.pi))
 
 
 def update(s: Array, p: Array, innov: Innovation) -> tuple[Array, Array]:
     """EKF update in Joseph form, which keeps P symmetric and positive for tiny covariances."""
     h = innov.jacobian
-    gain = p @ h.T @ np.linalg.inv(innov.cov)
+    gain = p @ h.T @ _inverse_and_det(innov.cov)[0]
     s_new = s + gain @ innov.residual
-    i_kh = np.eye(2) - gain @ h
+    i_kh = _EYE2 - gain @ h
     r_eff = innov.cov - h @ p @ h.T  # the measurement and pose part of S
     p_new = i_kh @ p @ i_kh.T + gain @ r_eff @ gain.T
     return s_new, 0.5 * (p_new + p_new.T)

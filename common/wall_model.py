@@ -24,6 +24,8 @@ All functions are pure and take plain numpy arrays: ``s``, ``anchor`` and ``z`` 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -38,34 +40,55 @@ def rotation(yaw: float) -> Array:
     return np.array([[c, -s], [s, c]])
 
 
+def _terms(
+    s: Array, anchor: Array, pose: Array
+) -> tuple[float, float, float, float, float, float, float]:
+    """Scalars shared by the model and its Jacobians: k, |s|^2, s.d, cos, sin, and R^T s.
+
+    Written out in scalars: these run for every candidate wall of every observation, where
+    numpy's per-call cost on 2-vectors would dominate.
+    """
+    sx, sy = float(s[0]), float(s[1])
+    dx, dy = float(pose[0]) - float(anchor[0]), float(pose[1]) - float(anchor[1])
+    rho2 = sx * sx + sy * sy
+    sd = sx * dx + sy * dy
+    c, n = math.cos(float(pose[2])), math.sin(float(pose[2]))
+    return 1.0 - sd / rho2, rho2, sd, c, n, c * sx + n * sy, -n * sx + c * sy
+
+
 def predict(s: Array, anchor: Array, pose: Array) -> Array:
     """Closest point of the wall to the robot, in the robot frame (the detector's (u, v))."""
-    d = pose[:2] - anchor
-    k = 1.0 - (s @ d) / (s @ s)
-    return k * (rotation(pose[2]).T @ s)
+    k, _, _, _, _, a, b = _terms(s, anchor, pose)
+    return np.array([k * a, k * b])
 
 
 def jacobian_state(s: Array, anchor: Array, pose: Array) -> Array:
-    """Jacobian of :func:`predict` with respect to the state ``s``, 2x2."""
-    d = pose[:2] - anchor
-    rho2 = s @ s
-    k = 1.0 - (s @ d) / rho2
-    grad_k = -d / rho2 + 2.0 * (s @ d) * s / rho2**2
-    return rotation(pose[2]).T @ (k * np.eye(2) + np.outer(s, grad_k))
+    """Jacobian of :func:`predict` with respect to the state ``s``, 2x2.
+
+    ``R^T (k I + s grad_k^T)`` with ``grad_k = -d/|s|^2 + 2 (s.d) s/|s|^4``.
+    """
+    k, rho2, sd, c, n, _, _ = _terms(s, anchor, pose)
+    sx, sy = float(s[0]), float(s[1])
+    dx, dy = float(pose[0]) - float(anchor[0]), float(pose[1]) - float(anchor[1])
+    gx = -dx / rho2 + 2.0 * sd * sx / (rho2 * rho2)
+    gy = -dy / rho2 + 2.0 * sd * sy / (rho2 * rho2)
+    m00, m01, m10, m11 = k + sx * gx, sx * gy, sy * gx, k + sy * gy
+    return np.array(
+        [[c * m00 + n * m10, c * m01 + n * m11], [-n * m00 + c * m10, -n * m01 + c * m11]]
+    )
 
 
 def jacobian_pose(s: Array, anchor: Array, pose: Array) -> Array:
     """Jacobian of :func:`predict` with respect to the pose (x, y, yaw), 2x3.
 
-    It says how pose error moves the observation, so pose uncertainty can enter the gate.
+    It says how pose error moves the observation, so pose uncertainty can enter the gate:
+    ``-R^T s s^T / |s|^2`` for the translation, ``k (-PERP) R^T s`` for the heading.
     """
-    d = pose[:2] - anchor
-    rho2 = s @ s
-    k = 1.0 - (s @ d) / rho2
-    rt = rotation(pose[2]).T
-    d_translation = -rt @ np.outer(s, s) / rho2
-    d_yaw = k * (-_PERP @ rt) @ s  # d(R^T)/d yaw = -PERP R^T
-    return np.column_stack([d_translation, d_yaw])
+    k, rho2, _, _, _, a, b = _terms(s, anchor, pose)
+    sx, sy = float(s[0]), float(s[1])
+    return np.array(
+        [[-a * sx / rho2, -a * sy / rho2, k * b], [-b * sx / rho2, -b * sy / rho2, -k * a]]
+    )
 
 
 def from_observation(z: Array, pose: Array) -> tuple[Array, Array, Array, Array]:

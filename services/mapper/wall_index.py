@@ -8,6 +8,7 @@ superset of the walls within the margin, which the caller then checks exactly.
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 
 import numpy as np
@@ -27,9 +28,10 @@ class WallIndex:
 
     def _cover(self, segment: Array, margin: float) -> list[tuple[int, int]]:
         """Cells of the segment's bounding box grown by ``margin``."""
-        lo = np.floor((segment.min(axis=0) - margin) / self.cell).astype(int)
-        hi = np.floor((segment.max(axis=0) + margin) / self.cell).astype(int)
-        return [(i, j) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)]
+        (ax, ay), (bx, by) = segment.tolist()
+        x0, x1 = (math.floor(v / self.cell) for v in (min(ax, bx) - margin, max(ax, bx) + margin))
+        y0, y1 = (math.floor(v / self.cell) for v in (min(ay, by) - margin, max(ay, by) + margin))
+        return [(i, j) for i in range(x0, x1 + 1) for j in range(y0, y1 + 1)]
 
     def file(self, wall_id: int, ends: Array) -> None:
         """File (or re-file) a wall under the cells near its extent."""

@@ -193,6 +193,10 @@ class Wall:
         self.foot = wall_model.foot(s, self.anchor)
         self.direction = wall_model.direction(s)
         self.normal = s / np.linalg.norm(s)
+        # The same as plain floats, and the extent's span along the line, for _near's hot loop.
+        self.frame = (*self.foot.tolist(), *self.direction.tolist(), *self.normal.tolist())
+        t = self.along(self.ends)
+        self.span = (float(t.min()), float(t.max()))
 
     def along(self, points: Array) -> Array:
         """Positions of map points along the wall, from its foot point."""
@@ -206,6 +210,7 @@ class Wall:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
         t = self.along(np.vstack([self.ends, points]))
         self.ends = self.on_line(np.array([t.min(), t.max()]))
+        self.span = (float(t.min()), float(t.max()))
 
     def segments(self) -> Array:
         """The served segments (k x 2 x 2), from the extent counts, on the current line."""
@@ -345,22 +350,21 @@ class WallMap:
         Their extent comes within ``max_gap`` (default ``max_extent_gap``) of the segment along
         the wall, and their line within ``NEAR_LINE`` of its middle: farther lines could only
         pass the association gate with metres of uncertainty, and leaving them out spares an
-        innovation each. All candidates are checked at once.
+        innovation each. Plain floats: there are only a handful of candidates.
         """
-        walls = [self.walls[i] for i in sorted(self.index.near(seg))]
-        if not walls:
-            return []
         limit = self.config.max_extent_gap if max_gap is None else max_gap
-        feet = np.array([w.foot for w in walls])
-        dirs = np.array([w.direction for w in walls])
-        normals = np.array([w.normal for w in walls])
-        ends = np.array([w.ends for w in walls])
-        t_obs = np.einsum("kpd,kd->kp", seg[None] - feet[:, None], dirs)
-        t_wall = np.einsum("kpd,kd->kp", ends - feet[:, None], dirs)
-        gap = np.maximum(t_obs.min(1) - t_wall.max(1), t_wall.min(1) - t_obs.max(1))
-        offset = np.abs(np.einsum("kd,kd->k", seg.mean(axis=0) - feet, normals))
-        keep = (gap <= limit) & (offset <= NEAR_LINE)
-        return [w for w, k in zip(walls, keep, strict=True) if k]
+        (ax, ay), (bx, by) = seg.tolist()
+        mx, my = 0.5 * (ax + bx), 0.5 * (ay + by)
+        near = []
+        for wall_id in sorted(self.index.near(seg)):
+            wall = self.walls[wall_id]
+            fx, fy, dx, dy, nx, ny = wall.frame
+            t0, t1 = (ax - fx) * dx + (ay - fy) * dy, (bx - fx) * dx + (by - fy) * dy
+            low, high = wall.span
+            gap = max(min(t0, t1) - high, low - max(t0, t1))
+            if gap <= limit and abs((mx - fx) * nx + (my - fy) * ny) <= NEAR_LINE:
+                near.append(wall)
+        return near
 
     def _new_wall(
         self, obs: WallObservation, pose: Array, pose_cov: Array, seg: Array, stamp: float
