@@ -27,6 +27,7 @@ sample: $(STAMP)
 		--width 128 --height 96 --rate 5 --compress
 
 bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev,bench]'
 	$(BIN)/python benchmarks/run.py
 
 clean:

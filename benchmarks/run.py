@@ -12,6 +12,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 SCRIPTS = [
+    ("detector per frame on 640-point rows, against scikit-learn", ["detector_speed.py"]),
     ("association + EKF update per observation", ["mapper_scaling.py"]),
     ("map/walls query latency, 10 concurrent clients", ["query_latency.py"]),
     ("end to end, 30 Hz 640x480 PointCloud2, one row per frame", ["end_to_end.py"]),

@@ -70,9 +70,11 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
     total = float(weights.sum())
     centroid = weights @ points / total
     centred = points - centroid
-    scatter = (centred * weights[:, None]).T @ centred
-    _, vectors = np.linalg.eigh(scatter)
-    normal = vectors[:, 0]
+    wx, wy = weights * centred[:, 0], weights * centred[:, 1]
+    sxx, syy, sxy = float(wx @ centred[:, 0]), float(wy @ centred[:, 1]), float(wx @ centred[:, 1])
+    # The scatter's major axis runs along the line; the normal is across it (closed form, 2x2).
+    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    normal = np.array([-math.sin(angle), math.cos(angle)])
     offset = float(normal @ centroid)
     if offset < 0.0:
         normal, offset = -normal, -offset
