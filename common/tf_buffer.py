@@ -8,6 +8,7 @@ microseconds per edge, which keeps 10^5 of them well under a second per edge on 
 
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
 
@@ -173,6 +174,32 @@ class TfBuffer:
     def __bool__(self) -> bool:
         """True once any transform was added, so callers can tell "no tf at all"."""
         return bool(self._edges)
+
+    def add_message(self, msg: Any, *, static: bool) -> tuple[list[tuple[str, float]], list[str]]:
+        """Add a ``tf2_msgs/TFMessage``'s transforms.
+
+        Returns:
+            ``(added, refused)``: (child frame, stamp) of each transform added, and the reason
+            for each one refused (tf2 skips unusable transforms rather than failing on them).
+        """
+        added, refused = [], []
+        for transform in msg.transforms:
+            t, q = transform.transform.translation, transform.transform.rotation
+            stamp = transform.header.stamp.sec + transform.header.stamp.nanosec * 1e-9
+            try:
+                self.add_transform(
+                    transform.header.frame_id,
+                    transform.child_frame_id,
+                    stamp,
+                    (t.x, t.y, t.z),
+                    (q.x, q.y, q.z, q.w),
+                    static=static,
+                )
+            except TfError as err:
+                refused.append(str(err))
+            else:
+                added.append((normalize_frame(transform.child_frame_id), stamp))
+        return added, refused
 
     def add_transform(
         self,

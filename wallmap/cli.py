@@ -130,18 +130,22 @@ def _cmd_player(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_query(args: argparse.Namespace) -> int:
+def _fetch(args: argparse.Namespace, **parameters: object) -> dict[str, object]:
+    """The live map, filtered by the command's --min-obs and --tentative, and ``parameters``."""
     settings = settings_from_args(args, wait_for_router=0.0)
     with open_session(settings) as session:
-        reply = fetch_map(
+        return fetch_map(
             session,
             Keys(settings.prefix),
             timeout=args.timeout,
             min_obs=args.min_obs,
             tentative=args.tentative or None,
-            bbox=args.bbox,
-            since=args.since,
+            **parameters,
         )
+
+
+def _cmd_query(args: argparse.Namespace) -> int:
+    reply = _fetch(args, bbox=args.bbox, since=args.since)
     print(to_json(reply) if args.json else format_table(reply))
     return 0
 
@@ -184,27 +188,14 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fetch_for_files(args: argparse.Namespace) -> dict[str, object]:
-    settings = settings_from_args(args, wait_for_router=0.0)
-    with open_session(settings) as session:
-        return fetch_map(
-            session,
-            Keys(settings.prefix),
-            timeout=args.timeout,
-            min_obs=args.min_obs,
-            tentative=args.tentative or None,
-            trajectory=True,
-        )
-
-
 def _cmd_plot(args: argparse.Namespace) -> int:
-    write_picture(args.out, _fetch_for_files(args), size=args.size)
+    write_picture(args.out, _fetch(args, trajectory=True), size=args.size)
     print(f"picture: {args.out}")
     return 0
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    write_geojson(args.out, _fetch_for_files(args))
+    write_geojson(args.out, _fetch(args, trajectory=True))
     print(f"GeoJSON: {args.out}")
     return 0
 

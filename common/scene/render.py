@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from functools import lru_cache
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -23,8 +23,25 @@ _KINECT_VFOV_DEG = 43.0
 _CHUNK_RAYS = 8192  # bounds the (rays x segments) temporaries to a few MB
 
 
+class _MountedSensor:
+    """JSON round trip for the sensors' dataclasses (their mount is a tuple)."""
+
+    mount_xyz: tuple[float, float, float]
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain-JSON form for ground-truth files."""
+        data = asdict(self)  # type: ignore[call-overload]
+        data["mount_xyz"] = list(self.mount_xyz)
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Self:
+        """Inverse of :meth:`to_json`."""
+        return cls(**{**data, "mount_xyz": tuple(data["mount_xyz"])})
+
+
 @dataclass(frozen=True)
-class Camera:
+class Camera(_MountedSensor):
     """A pinhole depth camera on the robot.
 
     Intrinsics left as NaN are derived from the Kinect's 57 x 43 degree field of view at
@@ -87,20 +104,9 @@ class Camera:
         transform[:3, 3] = self.mount_xyz
         return transform
 
-    def to_json(self) -> dict[str, Any]:
-        """Plain-JSON form for ground-truth files."""
-        data = asdict(self)
-        data["mount_xyz"] = list(self.mount_xyz)
-        return data
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> Camera:
-        """Inverse of :meth:`to_json`."""
-        return cls(**{**data, "mount_xyz": tuple(data["mount_xyz"])})
-
 
 @dataclass(frozen=True)
-class Scanner:
+class Scanner(_MountedSensor):
     """A planar laser scanner on the robot: 270 degrees in 0.5 degree steps, up to 8 m.
 
     Attributes:
@@ -138,17 +144,6 @@ class Scanner:
         transform = np.eye(4)
         transform[:3, 3] = self.mount_xyz
         return transform
-
-    def to_json(self) -> dict[str, Any]:
-        """Plain-JSON form for ground-truth files."""
-        data = asdict(self)
-        data["mount_xyz"] = list(self.mount_xyz)
-        return data
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> Scanner:
-        """Inverse of :meth:`to_json`."""
-        return cls(**{**data, "mount_xyz": tuple(data["mount_xyz"])})
 
 
 @lru_cache(maxsize=8)

@@ -98,22 +98,11 @@ class RosTfPoses:
         """Add the transforms; return the poses of every waiting stamp the tree now covers."""
         msg = _deserialize(payload, TF_TYPE)
         static = key.rstrip("/").endswith("tf_static")
-        for transform in msg.transforms:  # type: ignore[attr-defined]
-            t, q = transform.transform.translation, transform.transform.rotation
-            stamp = transform.header.stamp.sec + transform.header.stamp.nanosec * 1e-9
-            try:
-                self.tf.add_transform(
-                    transform.header.frame_id,
-                    transform.child_frame_id,
-                    stamp,
-                    (t.x, t.y, t.z),
-                    (q.x, q.y, q.z, q.w),
-                    static=static,
-                )
-            except TfError as err:
-                raise MessageError(str(err)) from err
-            if normalize_frame(transform.child_frame_id) == self.child and not static:
-                self.pending.append(stamp)
+        added, refused = self.tf.add_message(msg, static=static)
+        if refused:
+            raise MessageError(refused[0])
+        if not static:
+            self.pending.extend(stamp for child, stamp in added if child == self.child)
         poses, waiting = [], []
         for stamp in self.pending:
             try:

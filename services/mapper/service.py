@@ -193,11 +193,13 @@ def _observations(
 ) -> None:
     """Fold observations into the map in arrival order, each once its pose is known."""
     pending: collections.deque[tuple[float, Observations]] = collections.deque()
-    acks: dict[str, Progress] = {}
+    acks: dict[str, Progress] = {}  # the latest progress of each run, not yet published
+    unacked = 0  # frames processed since the last acknowledgement
     while True:
         try:
             if not pending:
                 _flush(acks, progress)  # idle: tell the players where we are
+                unacked = 0
                 sample = channel.recv()
             else:
                 sample = channel.try_recv() if len(pending) < MAX_PENDING else None
@@ -209,9 +211,10 @@ def _observations(
             except MessageError as err:
                 core.stats.refuse("observations", str(err))
         while pending and _process_head(pending, core, pose_wait, acks):
-            pass
-        if sum(a.processed for a in acks.values()) % ACK_EVERY == 0:
+            unacked += 1
+        if unacked >= ACK_EVERY:
             _flush(acks, progress)
+            unacked = 0
 
 
 def _flush(acks: dict[str, Progress], progress: zenoh.Publisher) -> None:

@@ -346,7 +346,7 @@ class BagSource:
         for connection, receive_ns, msg in self._messages(connections):
             topic = connection.topic
             if topic in tf_topics:
-                self._add_tf(msg, static=tf_topics[topic], invalid=invalid)
+                invalid += self._tf.add_message(msg, static=tf_topics[topic])[1]
             elif topic == pose_topic:
                 poses.append(pose_from_message(msg, receive_ns, child))
             elif camera_info is None:
@@ -362,23 +362,6 @@ class BagSource:
         if info_topic is not None and camera_info is None:
             raise PlayerError(f"camera info topic {info_topic!r} has no messages")
         return camera_info
-
-    def _add_tf(self, msg: Any, *, static: bool, invalid: list[str]) -> None:
-        """Add a TFMessage's transforms; unusable ones are collected, not fatal (as in tf2)."""
-        for transform in msg.transforms:
-            t, q = transform.transform.translation, transform.transform.rotation
-            stamp = transform.header.stamp.sec + transform.header.stamp.nanosec * 1e-9
-            try:
-                self._tf.add_transform(
-                    transform.header.frame_id,
-                    transform.child_frame_id,
-                    stamp,
-                    (t.x, t.y, t.z),
-                    (q.x, q.y, q.z, q.w),
-                    static=static,
-                )
-            except TfError as err:
-                invalid.append(str(err))
 
     # --- per frame ----------------------------------------------------------------------------
 
