@@ -16,6 +16,7 @@ SCRIPTS = [
     ("association + EKF update per observation", ["mapper_scaling.py"]),
     ("map/walls query latency, 10 concurrent clients", ["query_latency.py"]),
     ("end to end, 30 Hz 640x480 PointCloud2, one row per frame", ["end_to_end.py"]),
+    ("memory of each service over four bags", ["memory.py"]),
     ("end to end, the same bag, whole clouds", ["end_to_end.py", "--whole-clouds"]),
 ]
 
