@@ -79,6 +79,7 @@ def chart(
         )
         legend = M + 16 * (row + 1)
         out.append(f'<text x="{W - M - 150}" y="{legend}" fill="{colour}">{name}</text>')
+    out.append("</svg>")
     path.write_text("\n".join(out) + "\n", encoding="utf-8")
 
 
