@@ -120,7 +120,7 @@ def test_map_updates_stream_the_walls_as_they_change(stack, small_bag):
         updates = []
         while (sample := sub.try_recv()) is not None:
             updates.append(decode(sample.payload.to_bytes()))
-    assert 1 <= len(updates) <= 60 / 15 / 0.5 + 5  # rate-limited: ~ every 0.5 s while busy
+    assert 1 <= len(updates) < 30  # rate-limited: far fewer updates than the 60 frames
     latest: dict[int, dict] = {}
     for update in updates:
         for wall in update["walls"]:
