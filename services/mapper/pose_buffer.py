@@ -123,8 +123,3 @@ class PoseBuffer:
             near = min((before, after), key=lambda p: abs(p.stamp - stamp))
             return near if abs(near.stamp - stamp) <= tol else Lookup.MISSING
         return _interpolate(before, after, stamp)
-
-    @property
-    def newest(self) -> float | None:
-        """Stamp of the newest pose, if any."""
-        return self._stamps[-1] if self._stamps else None
