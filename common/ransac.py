@@ -129,13 +129,15 @@ def find_lines(points: Array, params: RansacParams, rng: np.random.Generator) ->
         if mask.sum() < params.min_points:
             break
         taken = np.flatnonzero(mask)
-        fit = fit_line(pts[taken], sigmas[taken])
+        fit = fit_line(pts[taken], sigmas[taken], cov_scale=params.cov_scale)
         accepted = []
         for seg in _segments(fit, pts[taken], sigmas[taken], params):
             if len(seg) < params.min_points:
                 continue
             idx = taken[seg]
-            seg_fit = fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
+            # A line not cut anywhere is the fit just made; only the pieces of a cut one are new.
+            whole = len(seg) == len(taken)
+            seg_fit = fit if whole else fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
             if seg_fit.length >= params.min_length and seg_fit.angle_sd <= params.max_angle_sd:
                 lines.append(seg_fit)
             accepted.append(taken[seg])
