@@ -295,6 +295,25 @@ def _walls_well_formed(
     return not (gaps[~joined] < _MIN_WALL_GAP).any()
 
 
+def _walled_plan(
+    segments: Sequence[Any], route: Sequence[Any], rng: np.random.Generator
+) -> tuple[FloorPlan, np.ndarray] | None:
+    """Walls of one ceiling height along ``segments`` and the smoothed ``route``.
+
+    None when the route passes too close to a wall. Draws the ceiling height from ``rng`` first:
+    the plan generators rely on that draw order for reproducible plans.
+    """
+    ceiling = float(rng.uniform(2.5, 3.0))
+    walls = tuple(
+        Wall(id=i, p0=_point(p), p1=_point(q), height=ceiling) for i, (p, q) in enumerate(segments)
+    )
+    plan = FloorPlan(walls=walls, ceiling_height=ceiling, route=tuple(_point(p) for p in route))
+    curve = smooth_route(plan.route)
+    if clearance(plan, curve).min() < _ROUTE_WALL_CLEARANCE:
+        return None
+    return plan, curve
+
+
 def _try_plan(
     rng: np.random.Generator,
     n_rooms: int,
@@ -359,14 +378,11 @@ def _try_plan(
     route.append((route[-1] + end) / 2 + np.array([0.0, rng.uniform(-0.4, 0.4)]))
     route.append(end)
 
-    ceiling = float(rng.uniform(2.5, 3.0))
-    walls = tuple(
-        Wall(id=i, p0=_point(p), p1=_point(q), height=ceiling) for i, (p, q) in enumerate(segments)
-    )
-    strip = FloorPlan(walls=walls, ceiling_height=ceiling, route=tuple(_point(p) for p in route))
-    curve = smooth_route(strip.route)
-    if clearance(strip, curve).min() < _ROUTE_WALL_CLEARANCE:
+    walled = _walled_plan(segments, route, rng)
+    if walled is None:
         return None
+    strip, curve = walled
+    walls, ceiling = strip.walls, strip.ceiling_height
 
     furniture: list[Furniture] = []
     for room in range(n_rooms):
@@ -551,14 +567,11 @@ def _try_corridor(
         route += [centre[i] - 0.8 * dirs[i - 1], centre[i], centre[i] + 0.8 * dirs[i]]
     route.append(centre[-1] - 1.5 * dirs[-1])
 
-    ceiling = float(rng.uniform(2.5, 3.0))
-    walls = tuple(
-        Wall(id=i, p0=_point(p), p1=_point(q), height=ceiling) for i, (p, q) in enumerate(segments)
-    )
-    plan = FloorPlan(walls=walls, ceiling_height=ceiling, route=tuple(_point(p) for p in route))
-    curve = smooth_route(plan.route)
-    if clearance(plan, curve).min() < _ROUTE_WALL_CLEARANCE:
+    walled = _walled_plan(segments, route, rng)
+    if walled is None:
         return None
+    plan, curve = walled
+    walls, ceiling = plan.walls, plan.ceiling_height
 
     furniture: list[Furniture] = []
     for room in rooms:
