@@ -66,41 +66,65 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
             camera's errors are), which the independent-points formula underestimates.
     """
     n = len(points)
-    weights = np.ones(n) if sigmas is None else 1.0 / sigmas**2
-    total = float(weights.sum())
-    centroid = weights @ points / total
-    centred = points - centroid
-    wx, wy = weights * centred[:, 0], weights * centred[:, 1]
-    sxx, syy, sxy = float(wx @ centred[:, 0]), float(wy @ centred[:, 1]), float(wx @ centred[:, 1])
-    # The scatter's major axis runs along the line; the normal is across it (closed form, 2x2).
-    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
-    normal = np.array([-math.sin(angle), math.cos(angle)])
-    offset = float(normal @ centroid)
-    if offset < 0.0:
-        normal, offset = -normal, -offset
-    along = np.array([-normal[1], normal[0]])
-    t = centred @ along
-    residuals = centred @ normal
-    chi2_per_dof = float(weights @ residuals**2) / max(n - 2, 1)
+    weights = np.ones(n) if sigmas is None else 1.0 / (sigmas * sigmas)
+    normal, offset, centroid, centred, total = _weighted_line(points, weights)
+    nx, ny = normal
+    # Positions along the line and residuals across it, in one product (this runs per line).
+    t, residuals = (centred @ np.array([[-ny, nx], [nx, ny]])).T
+    chi2_per_dof = float(weights @ (residuals * residuals)) / max(n - 2, 1)
     scale2 = chi2_per_dof if sigmas is None else max(chi2_per_dof, 1.0)
-    var_angle = scale2 / max(float(weights @ t**2), 1e-12)
+    var_angle = scale2 / max(float(weights @ (t * t)), 1e-12)
     var_offset = scale2 / total
     # Rotating the normal by d_angle about the centroid moves (u, v) along `jac_angle`.
-    jac_angle = normal * float(along @ centroid) + offset * along
-    cov = var_angle * np.outer(jac_angle, jac_angle) + var_offset * np.outer(normal, normal)
+    c_along = float(centroid[1] * nx - centroid[0] * ny)
+    jx, jy = nx * c_along - offset * ny, ny * c_along + offset * nx
+    cov = np.array(
+        [
+            [
+                var_angle * jx * jx + var_offset * nx * nx,
+                var_angle * jx * jy + var_offset * nx * ny,
+            ],
+            [
+                var_angle * jx * jy + var_offset * nx * ny,
+                var_angle * jy * jy + var_offset * ny * ny,
+            ],
+        ]
+    )
+    along = np.array([-ny, nx])
     return LineFit(
         normal=normal,
         offset=offset,
         centroid=centroid,
         closest=offset * normal,
         cov=cov_scale * cov,
-        p0=centroid + t.min() * along,
-        p1=centroid + t.max() * along,
+        p0=centroid + float(t.min()) * along,
+        p1=centroid + float(t.max()) * along,
         n_points=n,
-        rms=float(np.sqrt(residuals @ residuals / n)),
-        angle_sd=float(np.sqrt(cov_scale * var_angle)),
+        rms=math.sqrt(float(residuals @ residuals) / n),
+        angle_sd=math.sqrt(cov_scale * var_angle),
         noise_ratio=math.nan if sigmas is None else math.sqrt(chi2_per_dof),
     )
+
+
+def line_through(points: Array, sigmas: Array) -> tuple[Array, float]:
+    """The weighted TLS line's unit normal and offset alone, for when no more is needed."""
+    normal, offset, *_ = _weighted_line(points, 1.0 / (sigmas * sigmas))
+    return normal, offset
+
+
+def _weighted_line(points: Array, weights: Array) -> tuple[Array, float, Array, Array, float]:
+    """Normal (away from the origin), offset, centroid, centred points and total weight."""
+    total = float(weights.sum())
+    centroid = weights @ points / total
+    centred = points - centroid
+    (sxx, sxy), (_, syy) = (centred * weights[:, None]).T @ centred
+    # The scatter's major axis runs along the line; the normal is across it (closed form, 2x2).
+    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    normal = np.array([-math.sin(angle), math.cos(angle)])
+    offset = float(normal @ centroid)
+    if offset < 0.0:
+        normal, offset = -normal, -offset
+    return normal, offset, centroid, centred, total
 
 
 def _smallest_scatter_eigenvalue(
@@ -126,16 +150,15 @@ def bend_split(points: Array, sigmas: Array, min_points: int, f_threshold: float
     n = len(points)
     if n < 2 * min_points:
         return None
-    w = 1.0 / sigmas**2
-    xy = points - points.mean(axis=0)
-    x, y = xy[:, 0], xy[:, 1]
-    sums = np.cumsum(np.stack([w, w * x, w * y, w * x * x, w * x * y, w * y * y]), axis=1)
-    cut = np.arange(min_points, n - min_points + 1)
-    head = sums[:, cut - 1]
+    w = 1.0 / (sigmas * sigmas)
+    x, y = (points - points[n // 2]).T  # centred on a middle point, for precise sums
+    wx, wy = w * x, w * y
+    sums = np.cumsum(np.vstack((w, wx, wy, wx * x, wx * y, wy * y)), axis=1)
+    head = sums[:, min_points - 1 : n - min_points]
     tail = sums[:, -1:] - head
     two = _smallest_scatter_eigenvalue(*head) + _smallest_scatter_eigenvalue(*tail)
     one = float(_smallest_scatter_eigenvalue(*sums[:, -1]))
     best = int(np.argmin(two))
     residual = max(float(two[best]), 1e-12)
     f = ((one - residual) / 3.0) / (residual / (n - 5))
-    return int(cut[best]) if f > f_threshold else None
+    return min_points + best if f > f_threshold else None

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from wallmap.common.codec import MessageError
 
 Array = NDArray[np.float64]
+SEARCHED_ROWS = 64  # the band is looked for on about this many image rows (up to twice)
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,12 @@ def band_points(
 ) -> NDArray[np.float32]:
     """Per column, the point nearest the middle of the height band (sensor frame); NaN if none."""
     low, high = band
-    row_z = base_from_sensor[2].astype(np.float32)
-    height = points @ row_z[:3] + row_z[3]
+    a, b, c, d = base_from_sensor[2].astype(np.float32)
+    # Per axis rather than a matrix product: the player hands a strided view over the message.
+    height = points[..., 0] * a
+    height += points[..., 1] * b
+    height += points[..., 2] * c
+    height += d
     inside = (height >= low) & (height <= high)  # NaN compares False
     cost = np.where(inside, np.abs(height - 0.5 * (low + high)), np.inf)
     best = np.argmin(cost, axis=0)
@@ -80,6 +85,30 @@ def band_points(
     return chosen
 
 
+def rows_to_search(how: RowSelection, height: int) -> slice:
+    """The image rows a selection looks at, so a player decodes only those.
+
+    The band is searched on every k-th row, k = height // SEARCHED_ROWS: on a 480-row camera with
+    a 45 degree vertical field of view the searched rows are 0.7 degree apart, and an 0.8 m band
+    spans that out to 65 m, beyond any depth camera's range.
+    """
+    if height <= 1:
+        return slice(0, height)
+    if how.mode == "row":
+        row = round(how.row_fraction * (height - 1))
+        return slice(row, row + 1)
+    return slice(0, height, max(1, height // SEARCHED_ROWS))
+
+
+def pick_points(
+    searched: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+) -> NDArray[np.float32]:
+    """The scan row (columns x 3) from the rows ``rows_to_search`` chose, and only those."""
+    if searched.shape[0] == 1:
+        return searched[0]
+    return band_points(searched, base_from_sensor, how.band)
+
+
 def select_points(
     points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
 ) -> NDArray[np.float32]:
@@ -87,11 +116,8 @@ def select_points(
 
     The player applies it too, so that only this row travels (see RowSelection.to_map).
     """
-    if points.shape[0] == 1:
-        return points[0]
-    if how.mode == "row":
-        return points[round(how.row_fraction * (points.shape[0] - 1))]
-    return band_points(points, base_from_sensor, how.band)
+    searched = points[rows_to_search(how, points.shape[0])]
+    return pick_points(searched, base_from_sensor, how)
 
 
 def select_scan(points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection) -> Array:

@@ -16,6 +16,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from wallmap.common.messages import Pose
+from wallmap.common.scan_row import RowSelection, rows_to_search, select_points
+from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import transform_matrix
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
@@ -769,3 +771,27 @@ def test_tum_file(tmp_path: Path) -> None:
     path.write_text("# only comments\n")
     with pytest.raises(PlayerError, match="holds no poses"):
         load_tum(path)
+
+
+def test_player_rows_are_the_detectors_rows(tmp_path: Path) -> None:
+    """Decoding only the searched rows picks the very points a whole cloud would give."""
+    bag = tmp_path / "tall.bag"
+    write_scene_bag(
+        bag,
+        seed=5,
+        n_frames=6,
+        fmt="ros1",
+        sensor="pointcloud",
+        camera=Camera(width=48, height=200),
+    )
+    how = RowSelection()
+    assert rows_to_search(how, 200).step == 3
+    with BagSource(bag) as source:
+        whole = [frame for frame, _ in source.frames()]
+        rows = [frame for frame, _ in source.frames(how)]
+    assert len(rows) == len(whole) == 6
+    for full, row in zip(whole, rows, strict=True):
+        assert row.points.shape == (1, 48, 3)
+        expected = select_points(full.points, full.T_base_sensor, how)
+        np.testing.assert_array_equal(row.points[0], expected)
+        assert np.isfinite(expected).all(axis=1).sum() > 24  # the band is seen: a real check

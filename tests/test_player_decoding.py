@@ -9,7 +9,7 @@ from rosbags.typesys import Stores, get_typestore
 from wallmap.services.player.depth import _rays, depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.laserscan import laserscan_to_xyz
-from wallmap.services.player.pointcloud import pointcloud2_to_xyz
+from wallmap.services.player.pointcloud import pointcloud2_to_xyz, pointcloud2_xyz
 
 ROS2 = get_typestore(Stores.ROS2_HUMBLE).types
 ROS1 = get_typestore(Stores.ROS1_NOETIC).types
@@ -95,6 +95,34 @@ def test_pointcloud_non_finite_points_become_nan() -> None:
     assert np.isnan(out[1, 2]).all()
     assert np.isnan(out[3, 4]).all()
     assert np.isfinite(out).all(axis=2).sum() == 20 - 2
+
+
+@pytest.mark.parametrize(
+    ("offsets", "bigendian"), [((0, 4, 8), False), ((0, 4, 8), True), ((8, 0, 24), False)]
+)
+def test_pointcloud_some_rows_are_those_rows_of_the_whole(
+    offsets: tuple[int, int, int], bigendian: bool
+) -> None:
+    xyz = random_xyz(9, 4)
+    xyz[4, 1, 2] = np.inf
+    msg = make_cloud(xyz, offsets=offsets, row_pad=8, bigendian=bigendian)
+    whole = pointcloud2_to_xyz(msg)
+    for rows in (slice(0, 9, 4), slice(4, 5), slice(None)):
+        np.testing.assert_array_equal(pointcloud2_to_xyz(msg, rows), whole[rows])
+    assert np.isnan(pointcloud2_to_xyz(msg, slice(4, 5))[0, 1]).all()
+    view = pointcloud2_xyz(msg, slice(0, 9, 4))  # no copy, non-finite left as it is
+    np.testing.assert_array_equal(view, xyz[0:9:4])
+    if offsets == (0, 4, 8):
+        assert not view.flags.owndata
+
+
+def test_depth_some_rows_are_those_rows_of_the_whole() -> None:
+    depth_mm = np.random.default_rng(2).integers(0, 4000, size=(HEIGHT, WIDTH)).astype(np.uint16)
+    image = make_depth(depth_mm, "16UC1")
+    whole = depth_image_to_xyz(image, camera_info())
+    np.testing.assert_array_equal(
+        depth_image_to_xyz(image, camera_info(), slice(1, HEIGHT, 3)), whole[1:HEIGHT:3]
+    )
 
 
 def test_pointcloud_unorganized_is_one_row() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -55,7 +56,7 @@ class NoiseLevel:
         """Update the scale from one frame's lines."""
         ratios = [line.noise_ratio for line in lines if math.isfinite(line.noise_ratio)]
         if ratios:
-            step = self.RATE * math.log(float(np.median(ratios)))
+            step = self.RATE * math.log(statistics.median(ratios))  # numpy's is slow on a few
             self.scale = min(max(self.scale * math.exp(step), self.LIMITS[0]), self.LIMITS[1])
 
 

@@ -11,6 +11,7 @@ import threading
 
 import zenoh
 
+from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.messages import pack, unpack_frame
 from wallmap.common.runtime import Stats, drain, setup_logging
@@ -23,6 +24,7 @@ QUEUE_DEPTH = 8
 def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) -> Stats:
     """Run until ``stop`` is set; returns the counters."""
     log = setup_logging("detector")
+    keep_large_buffers()  # whole clouds are megabytes each
     keys = Keys(settings.prefix)
     stats = Stats(log)
     detector = WallDetector(config)

@@ -35,8 +35,10 @@ class WallIndex:
 
     def file(self, wall_id: int, ends: Array) -> None:
         """File (or re-file) a wall under the cells near its extent."""
-        self.remove(wall_id)
         cells = self._cover(ends, self.margin)
+        if self._filed.get(wall_id) == cells:
+            return  # the usual case: an update moves a wall's ends by millimetres
+        self.remove(wall_id)
         for cell in cells:
             self._cells[cell].add(wall_id)
         self._filed[wall_id] = cells

@@ -137,8 +137,9 @@ class MapQuery:
 
 def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     """Whether pose ``b`` is a new viewpoint after ``a``."""
-    turn = abs(np.remainder(b[2] - a[2] + np.pi, 2 * np.pi) - np.pi)
-    return bool(np.hypot(*(b[:2] - a[:2])) >= distance or turn >= angle)
+    (ax, ay, ayaw), (bx, by, byaw) = a.tolist(), b.tolist()
+    turn = abs((byaw - ayaw + math.pi) % (2 * math.pi) - math.pi)
+    return math.hypot(bx - ax, by - ay) >= distance or turn >= angle
 
 
 def _end_near(segments: Array, point: Array, reach: float) -> tuple[int, int] | None:
@@ -191,12 +192,20 @@ class Wall:
         """New EKF state; the line's foot point, direction and normal follow."""
         self.s, self.p = s, p
         self.foot = wall_model.foot(s, self.anchor)
-        self.direction = wall_model.direction(s)
-        self.normal = s / np.linalg.norm(s)
+        (fx, fy), (sx, sy) = self.foot.tolist(), s.tolist()
+        r = math.hypot(sx, sy)
+        nx, ny = sx / r, sy / r
+        self.normal = np.array([nx, ny])
+        self.direction = np.array([-ny, nx])  # wall_model.direction, in floats
         # The same as plain floats, and the extent's span along the line, for _near's hot loop.
-        self.frame = (*self.foot.tolist(), *self.direction.tolist(), *self.normal.tolist())
-        t = self.along(self.ends)
-        self.span = (float(t.min()), float(t.max()))
+        self.frame = (fx, fy, -ny, nx, nx, ny)
+        self.span = self._span(self.ends.tolist())
+
+    def _span(self, points: list[list[float]]) -> tuple[float, float]:
+        """Lowest and highest position of map points along the wall (plain floats)."""
+        fx, fy, dx, dy, _, _ = self.frame
+        t = [(x - fx) * dx + (y - fy) * dy for x, y in points]
+        return min(t), max(t)
 
     def along(self, points: Array) -> Array:
         """Positions of map points along the wall, from its foot point."""
@@ -208,9 +217,8 @@ class Wall:
 
     def extend(self, points: Array) -> None:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
-        t = self.along(np.vstack([self.ends, points]))
-        self.ends = self.on_line(np.array([t.min(), t.max()]))
-        self.span = (float(t.min()), float(t.max()))
+        self.span = self._span(self.ends.tolist() + points.tolist())
+        self.ends = self.on_line(np.array(self.span))
 
     def segments(self) -> Array:
         """The served segments (k x 2 x 2), from the extent counts, on the current line."""
@@ -356,13 +364,19 @@ class WallMap:
         (ax, ay), (bx, by) = seg.tolist()
         mx, my = 0.5 * (ax + bx), 0.5 * (ay + by)
         near = []
+        walls = self.walls
         for wall_id in sorted(self.index.near(seg)):
-            wall = self.walls[wall_id]
+            wall = walls[wall_id]
             fx, fy, dx, dy, nx, ny = wall.frame
             t0, t1 = (ax - fx) * dx + (ay - fy) * dy, (bx - fx) * dx + (by - fy) * dy
+            if t0 > t1:
+                t0, t1 = t1, t0
             low, high = wall.span
-            gap = max(min(t0, t1) - high, low - max(t0, t1))
-            if gap <= limit and abs((mx - fx) * nx + (my - fy) * ny) <= NEAR_LINE:
+            if (
+                t0 - high <= limit
+                and low - t1 <= limit
+                and -NEAR_LINE <= (mx - fx) * nx + (my - fy) * ny <= NEAR_LINE
+            ):
                 near.append(wall)
         return near
 

@@ -25,12 +25,13 @@ from wallmap.common.ros_poses import (
     pose_from_matrix,
     pose_from_message,
 )
+from wallmap.common.scan_row import RowSelection, pick_points, rows_to_search
 from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
 from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.laserscan import laserscan_to_xyz
-from wallmap.services.player.pointcloud import pointcloud2_to_xyz
+from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 from wallmap.services.player.pose_sources import (
     PoseSourceSpec,
     PoseTrack,
@@ -56,7 +57,7 @@ SUPPORTED_SENSORS = (
 )
 BAG_FORMS = "a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml, or a ROS 2 .mcap file"
 
-Decoder = Callable[[Any], np.ndarray]
+Decoder = Callable[[Any, slice], np.ndarray]  # a message and the rows to decode
 
 
 def _one_line(err: BaseException) -> str:
@@ -308,12 +309,16 @@ class BagSource:
         )
 
     def _decoder(self, camera_info: Any) -> Decoder:
-        """The function turning one sensor message into an (h, w, 3) grid."""
+        """The function turning one sensor message into an (h, w, 3) grid.
+
+        A cloud's grid is a view over the message with non-finite points left as they are, so a
+        scan row is picked without copying the cloud; ``frames`` cleans what it hands out.
+        """
         if self.sensor_type == POINTCLOUD2:
-            return pointcloud2_to_xyz
+            return pointcloud2_xyz
         if self.sensor_type == LASERSCAN:
-            return laserscan_to_xyz
-        return lambda image: depth_image_to_xyz(image, camera_info)
+            return lambda scan, _rows: laserscan_to_xyz(scan)
+        return lambda image, rows: depth_image_to_xyz(image, camera_info, rows)
 
     # --- first pass: tf, poses, camera info ---------------------------------------------------
 
@@ -433,8 +438,13 @@ class BagSource:
         except Exception as err:  # damaged chunks surface as assorted library errors
             raise _unreadable(self.path, err) from err
 
-    def frames(self) -> Iterator[tuple[SensorFrame, Pose | None]]:
+    def frames(self, rows: RowSelection | None = None) -> Iterator[tuple[SensorFrame, Pose | None]]:
         """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
+
+        Args:
+            rows: Hand out only the scan row this selection picks, as a (1, w, 3) grid, reading
+                only the image rows it searches (``rows_to_search``): decoding whole clouds is
+                most of a player's time. None hands out every row.
 
         Raises:
             PlayerError: A message cannot be read or decoded (its index is named).
@@ -444,8 +454,15 @@ class BagSource:
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
             try:
-                points = self._decode(msg)
                 mount = self._mount(frame_id, stamp)
+                if rows is None:
+                    points = self._decode(msg, slice(None))
+                else:  # a LaserScan has no height: it is one row
+                    searched = self._decode(msg, rows_to_search(rows, getattr(msg, "height", 1)))
+                    points = pick_points(searched, mount, rows)[None]
+                if points.base is not None or points.dtype != np.float32:  # not ours to change
+                    points = np.array(points, dtype=np.float32)
+                points = invalid_to_nan(points)
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
             yield SensorFrame(stamp, frame_id, points, mount), self._pose_at(stamp)

@@ -58,19 +58,20 @@ def _pixels(image: Any, itemsize: int, kind: str) -> np.ndarray:
     return np.ndarray(shape=(height, width), dtype=dtype, buffer=data, strides=(step, itemsize))
 
 
-def depth_image_to_xyz(image: Any, camera_info: Any) -> np.ndarray:
-    """Back-project a depth image into float32 (h, w, 3) points in its optical frame.
+def depth_image_to_xyz(image: Any, camera_info: Any, rows: slice = slice(None)) -> np.ndarray:
+    """Back-project a depth image (or some of its rows) into float32 (rows, w, 3) points.
 
     The optical frame has z forward, x right and y down. ``16UC1`` is millimetres with 0 meaning
     no return; ``32FC1`` is metres with NaN, inf and non-positive values meaning no return. Pixels
-    without a return are NaN in all three coordinates.
+    without a return are NaN in all three coordinates. Points are in the optical frame.
 
     Args:
         image: A deserialized sensor_msgs/msg/Image with a supported depth encoding.
         camera_info: The camera's sensor_msgs/msg/CameraInfo; only K (pinhole) is used.
+        rows: The rows to back-project (all by default).
 
     Returns:
-        Freshly allocated float32 array of shape (height, width, 3).
+        Freshly allocated float32 array of shape (rows, width, 3).
 
     Raises:
         PlayerError: Unsupported encoding, image size differing from the calibration, missing
@@ -85,16 +86,16 @@ def depth_image_to_xyz(image: Any, camera_info: Any) -> np.ndarray:
             f"{info_size[1]}x{info_size[0]}"
         )
     if encoding == "16UC1":
-        raw = _pixels(image, 2, "u")
+        raw = _pixels(image, 2, "u")[rows]
         depth = raw.astype(np.float32) * _MM_TO_M
         depth[raw == 0] = np.nan
     elif encoding == "32FC1":
-        depth = _pixels(image, 4, "f").astype(np.float32)
+        depth = _pixels(image, 4, "f")[rows].astype(np.float32)
         depth[~(np.isfinite(depth) & (depth > 0))] = np.nan
     else:
         raise PlayerError(
             f"depth image encoding {encoding!r} is not supported "
             f"(supported: {', '.join(SUPPORTED_ENCODINGS)})"
         )
-    rays = _rays(height, width, _intrinsics(camera_info))
+    rays = _rays(height, width, _intrinsics(camera_info))[rows]
     return rays * depth[..., np.newaxis]

@@ -12,7 +12,8 @@ class SensorFrame:
     Attributes:
         stamp: Header stamp in float seconds (bag receive time when the header stamp is zero).
         frame_id: Sensor frame the points are expressed in.
-        points: float32 (h, w, 3) points in the sensor frame; NaN marks pixels without a return.
+        points: float32 (rows, w, 3) points in the sensor frame (every row, or those the player
+            asked for); NaN marks pixels without a return.
         T_base_sensor: float64 4x4 transform mapping sensor-frame points into the base frame.
     """
 

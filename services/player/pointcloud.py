@@ -44,18 +44,18 @@ def _xyz_offsets(msg: Any) -> tuple[int, int, int]:
     return offsets[0], offsets[1], offsets[2]
 
 
-def pointcloud2_to_xyz(msg: Any) -> np.ndarray:
-    """Decode a PointCloud2 into a float32 (height, width, 3) array.
+def pointcloud2_xyz(msg: Any, rows: slice = slice(None)) -> np.ndarray:
+    """The x, y, z of a PointCloud2's rows as (rows, width, 3) float32, without copying if it can.
 
     Any field layout, ``point_step``, ``row_step`` and byte order is accepted as long as x, y and
-    z are FLOAT32. Points with any non-finite coordinate become all-NaN so consumers test one
-    value for "no return". Unorganized clouds come back as a single row (1, n, 3).
+    z are FLOAT32. Contiguous x, y, z (the common case) come back as a strided view over the
+    message buffer, so picking a scan row reads only the points it looks at; other layouts are
+    copied. Non-finite coordinates are left as they are (see ``invalid_to_nan``). Unorganized
+    clouds come back as a single row (1, n, 3).
 
     Args:
         msg: A deserialized sensor_msgs/msg/PointCloud2 (ROS 1 or ROS 2).
-
-    Returns:
-        Freshly allocated float32 array of shape (height, width, 3), native byte order.
+        rows: The rows wanted (all by default); the others are never read.
 
     Raises:
         PlayerError: x/y/z missing or not FLOAT32, or the buffer is too small for the layout.
@@ -64,7 +64,7 @@ def pointcloud2_to_xyz(msg: Any) -> np.ndarray:
     point_step, row_step = int(msg.point_step), int(msg.row_step)
     ox, oy, oz = _xyz_offsets(msg)
     if height == 0 or width == 0:
-        return np.empty((height, width, 3), dtype=np.float32)
+        return np.empty((len(range(height)[rows]), width, 3), dtype=np.float32)
     if max(ox, oy, oz) + 4 > point_step:
         raise PlayerError(
             f"PointCloud2 point_step {point_step} is smaller than its x/y/z fields "
@@ -81,31 +81,52 @@ def pointcloud2_to_xyz(msg: Any) -> np.ndarray:
         raise PlayerError(
             f"PointCloud2 data has {data.size} bytes but its {height}x{width} layout needs {needed}"
         )
-
     order = ">" if msg.is_bigendian else "<"
     if (oy, oz) == (ox + 4, ox + 8):
-        # Contiguous xyz (the common case): one (3,) subarray field, copied in one pass.
-        names, formats, offsets = ["xyz"], [f"{order}3f4"], [ox]
-    else:
-        names, formats, offsets = list(_XYZ), [f"{order}f4"] * 3, [ox, oy, oz]
+        view = np.ndarray(
+            shape=(height, width, 3),
+            dtype=f"{order}f4",
+            buffer=data,
+            offset=ox,
+            strides=(row_step, point_step, 4),
+        )
+        return view[rows]
     dtype = np.dtype(
-        {"names": names, "formats": formats, "offsets": offsets, "itemsize": point_step}
+        {
+            "names": _XYZ,
+            "formats": [f"{order}f4"] * 3,
+            "offsets": [ox, oy, oz],
+            "itemsize": point_step,
+        }
     )
     grid = np.ndarray(
         shape=(height, width), dtype=dtype, buffer=data, strides=(row_step, point_step)
-    )
-    out = np.empty((height, width, 3), dtype=np.float32)
-    if names == ["xyz"]:
-        out[...] = grid["xyz"]
-    else:
-        for i, name in enumerate(_XYZ):
-            out[..., i] = grid[name]
-    finite = np.isfinite(out)
+    )[rows]
+    out = np.empty((*grid.shape, 3), dtype=np.float32)
+    for i, name in enumerate(_XYZ):
+        out[..., i] = grid[name]
+    return out
+
+
+def invalid_to_nan(points: np.ndarray) -> np.ndarray:
+    """Make every point with a non-finite coordinate all-NaN, in place, and return it.
+
+    Consumers then test one value for "no return".
+    """
+    finite = np.isfinite(points)
     if not finite.all():
         # Explicit ands and adding NaN (0 elsewhere) per axis: reducing over the length-3 axis
         # and boolean-mask assignment are each several times slower on 640x480 clouds.
         valid = finite[..., 0] & finite[..., 1] & finite[..., 2]
         penalty = np.where(valid, np.float32(0.0), np.float32(np.nan))
         for axis in range(3):
-            out[..., axis] += penalty
-    return out
+            points[..., axis] += penalty
+    return points
+
+
+def pointcloud2_to_xyz(msg: Any, rows: slice = slice(None)) -> np.ndarray:
+    """Decode a PointCloud2's rows into a fresh native float32 (rows, width, 3) array.
+
+    As ``pointcloud2_xyz``, and points with any non-finite coordinate become all-NaN.
+    """
+    return invalid_to_nan(np.array(pointcloud2_xyz(msg, rows), dtype=np.float32))

@@ -17,10 +17,11 @@ from pathlib import Path
 
 import zenoh
 
+from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import Frame, pack, unpack_progress
 from wallmap.common.runtime import setup_logging
-from wallmap.common.scan_row import RowSelection, select_points
+from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.player.bag_source import LASERSCAN, BagSource
 from wallmap.services.player.errors import PlayerError
@@ -69,7 +70,7 @@ class PlayResult:
     def summary(self) -> str:
         """One line for people."""
         fps = self.frames / self.seconds if self.seconds > 0 else 0.0
-        line = f"published {self.frames} frames and {self.poses} poses in {self.seconds:.1f} s"
+        line = f"published {self.frames} frames and {self.poses} poses in {self.seconds:.2f} s"
         line += f" ({fps:.1f} frames/s)"
         if self.integrated is not None:
             line += f"; the mapper integrated {self.integrated}"
@@ -162,6 +163,7 @@ class _ProgressLine:
 def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) -> PlayResult:
     """Play the bag once; raises PlayerError (or TransportError) with a readable message."""
     log = setup_logging("player")
+    keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
     with BagSource(
@@ -195,7 +197,7 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             published = poses = 0
             start_wall = time.monotonic()
             first_stamp: float | None = None
-            for frame, pose in bag.frames():
+            for frame, pose in bag.frames(rows):
                 if stop.is_set():
                     break
                 if player.fast:
@@ -207,15 +209,12 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 if pose is not None:
                     pose_pub.put(pack(pose))
                     poses += 1
-                points = frame.points
-                if rows is not None:
-                    points = select_points(points, frame.T_base_sensor, rows)[None]
                 message = Frame(
                     run_id,
                     published,
                     frame.stamp,
                     frame.frame_id,
-                    points,
+                    frame.points,
                     frame.T_base_sensor,
                     sensor,
                 )
