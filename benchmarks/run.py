@@ -16,6 +16,7 @@ SCRIPTS = [
     ("association + EKF update per observation", ["mapper_scaling.py"]),
     ("map/walls query latency, 10 concurrent clients", ["query_latency.py"]),
     ("end to end, 30 Hz 640x480 PointCloud2, against the read floor", ["end_to_end.py"]),
+    ("end to end, the same bag LZ4-compressed", ["end_to_end.py", "--compress"]),
     ("memory of each service over four bags", ["memory.py"]),
     ("the paper's four timing figures (SVG)", ["figures.py", "--out", "../docs/figures"]),
 ]

@@ -142,13 +142,15 @@ def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     return math.hypot(bx - ax, by - ay) >= distance or turn >= angle
 
 
-def _end_near(segments: Array, point: Array, reach: float) -> tuple[int, int] | None:
-    """Index of the wall end (first segment's start or last one's end) within reach of point."""
-    px, py = float(point[0]), float(point[1])
-    ends = ((0, 0), (len(segments) - 1, 1))
-    distance = [math.hypot(segments[e][0] - px, segments[e][1] - py) for e in ends]
-    best = 0 if distance[0] <= distance[1] else 1
-    return ends[best] if distance[best] <= reach else None
+def _end_near(ends: list[float], px: float, py: float, reach: float) -> int | None:
+    """Which wall end lies within reach of point (px, py), the nearer if both, or None.
+
+    ``ends`` is (x0, y0, x1, y1): 0 is the first segment's start, 1 the last one's end.
+    """
+    x0, y0, x1, y1 = ends
+    d0, d1 = math.hypot(x0 - px, y0 - py), math.hypot(x1 - px, y1 - py)
+    best, distance = (0, d0) if d0 <= d1 else (1, d1)
+    return best if distance <= reach else None
 
 
 def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
@@ -186,6 +188,7 @@ class Wall:
     last_view: Array  # (x, y, yaw) of the last distinct viewpoint
 
     def __post_init__(self) -> None:
+        self._segments: tuple[tuple[int, bytes], Array] | None = None
         self.set_state(self.s, self.p)
 
     def set_state(self, s: Array, p: Array) -> None:
@@ -221,10 +224,19 @@ class Wall:
         self.ends = self.on_line(np.array(self.span))
 
     def segments(self) -> Array:
-        """The served segments (k x 2 x 2), from the extent counts, on the current line."""
-        intervals = self.extent.intervals()
-        axis = self.extent.origin + np.outer(np.ravel(intervals), self.extent.direction)
-        return self.on_line(self.along(axis)).reshape(-1, 2, 2)
+        """The served segments (k x 2 x 2), from the extent counts, on the current line.
+
+        Kept until the line or the counts change (every change to the counts comes with one to
+        ``n_obs``), so replies on a large map redo only the walls that changed. Read-only.
+        """
+        key = (self.n_obs, self.s.tobytes())
+        if self._segments is None or self._segments[0] != key:
+            intervals = self.extent.intervals()
+            axis = self.extent.origin + np.outer(np.ravel(intervals), self.extent.direction)
+            pieces = self.on_line(self.along(axis)).reshape(-1, 2, 2)
+            pieces.flags.writeable = False
+            self._segments = (key, pieces)
+        return self._segments[1]
 
     def confirmed(self, config: MapperConfig) -> bool:
         """Seen often enough, from enough viewpoints, to be served as a wall."""
@@ -431,11 +443,13 @@ class WallMap:
         An end of a served wall that meets a served neighbour's end at a corner moves onto the
         corner. ``served`` caches :meth:`served` and comes back filled for ``ids``.
         """
-        raw: dict[int, Array] = {}
+        raw: dict[int, tuple[Array, list[float]]] = {}
 
-        def segments(wall: Wall) -> Array:
+        def segments(wall: Wall) -> tuple[Array, list[float]]:
+            """The wall's segments and its two ends (x0, y0, x1, y1) as floats."""
             if wall.id not in raw:
-                raw[wall.id] = wall.segments()
+                pieces = wall.segments()
+                raw[wall.id] = pieces, [*pieces[0, 0].tolist(), *pieces[-1, 1].tolist()]
             return raw[wall.id]
 
         def is_served(wall: Wall) -> bool:
@@ -443,26 +457,29 @@ class WallMap:
                 served[wall.id] = self.served(wall)
             return served[wall.id]
 
-        sin_min = np.sin(self.config.corner_angle)
+        sin_min, reach = math.sin(self.config.corner_angle), self.config.corner_reach
         out = {}
         for wall_id in ids:
             a = self.walls[wall_id]
-            mine = segments(a).copy()
+            pieces, a_ends = segments(a)
+            mine = pieces.copy()
             out[wall_id] = mine
             if not is_served(a):
                 continue
+            afx, afy, _, _, anx, any_ = a.frame
+            a_offset = anx * afx + any_ * afy
             for b in (self.walls[i] for i in sorted(self.index.near(a.ends)) if i != a.id):
-                if not is_served(b):
+                bfx, bfy, _, _, bnx, bny = b.frame
+                det = anx * bny - any_ * bnx  # sine of the angle between the lines
+                if abs(det) < sin_min or not is_served(b):
                     continue
-                if abs(a.normal[0] * b.normal[1] - a.normal[1] * b.normal[0]) < sin_min:
-                    continue
-                corner = np.linalg.solve(
-                    np.array([a.normal, b.normal]), [a.normal @ a.foot, b.normal @ b.foot]
-                )
-                end_a = _end_near(segments(a), corner, self.config.corner_reach)
-                end_b = _end_near(segments(b), corner, self.config.corner_reach)
-                if end_a is not None and end_b is not None:
-                    mine[end_a] = corner
+                b_offset = bnx * bfx + bny * bfy
+                # Where the two lines cross (Cramer's rule on the 2x2 system of their normals).
+                cx = (a_offset * bny - any_ * b_offset) / det
+                cy = (anx * b_offset - bnx * a_offset) / det
+                end_a = _end_near(a_ends, cx, cy, reach)
+                if end_a is not None and _end_near(segments(b)[1], cx, cy, reach) is not None:
+                    mine[(0, -1)[end_a], end_a] = (cx, cy)
         return out
 
     def reply(self, query: MapQuery | None = None) -> dict[str, Any]:

@@ -31,6 +31,7 @@ from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xy
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.laserscan import laserscan_to_xyz
+from wallmap.services.player.mapped_bag import mapped_messages
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 from wallmap.services.player.pose_sources import (
     PoseSourceSpec,
@@ -427,13 +428,22 @@ class BagSource:
         )
         return dataclasses.replace(moved, cov=pose.cov)
 
-    def _messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, Any]]:
-        """Deserialized messages of some connections in bag order; errors become PlayerError."""
+    def _messages(
+        self, connections: Iterable[Connection], *, mapped: bool = False
+    ) -> Iterator[tuple[Connection, int, Any]]:
+        """Deserialized messages of some connections in bag order; errors become PlayerError.
+
+        With ``mapped``, messages of an uncompressed ROS 1 bag are views over the mapped file
+        (see ``mapped_bag``): for large clouds of which only some rows are read.
+        """
         connections = list(connections)
         if not connections:
             return
         try:
-            for connection, receive_ns, raw in self._reader.messages(connections=connections):
+            raws = mapped_messages(self._reader, connections) if mapped else None
+            if raws is None:
+                raws = self._reader.messages(connections=connections)
+            for connection, receive_ns, raw in raws:
                 yield connection, receive_ns, self._reader.deserialize(raw, connection.msgtype)
         except Exception as err:  # damaged chunks surface as assorted library errors
             raise _unreadable(self.path, err) from err
@@ -450,7 +460,7 @@ class BagSource:
             PlayerError: A message cannot be read or decoded (its index is named).
         """
         connections = self._topics[self.sensor_topic].connections
-        for index, (_, receive_ns, msg) in enumerate(self._messages(connections)):
+        for index, (_, receive_ns, msg) in enumerate(self._messages(connections, mapped=True)):
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
             try:
