@@ -11,6 +11,7 @@ or an occluder.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -47,6 +48,9 @@ class RansacParams:
             (m) meet there: near a corner the inlier band takes in the other wall's points and
             would carry each line past the corner.
         corner_angle: lines closer to parallel than this (rad) have no corner.
+        nan_run: runs of at most this many invalid points do not split a cluster (0: any does,
+            as in the paper; a lidar's dropouts need more).
+        max_jump: neighbouring points farther apart than this (m) split a cluster.
     """
 
     iterations: int = 96
@@ -64,13 +68,26 @@ class RansacParams:
     max_angle_sd: float = 0.04
     corner_reach: float = 0.4
     corner_angle: float = np.radians(3.0)
+    nan_run: int = 0
+    max_jump: float = math.inf
 
 
-def split_at_nans(points: Array) -> list[NDArray[np.intp]]:
-    """Indices of the runs of finite points in a scan (N x 2): the paper's clusterByNaN."""
-    valid = np.isfinite(points).all(axis=1)
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], valid.view(np.int8), [0]))))
-    return [np.arange(start, stop) for start, stop in zip(edges[::2], edges[1::2], strict=True)]
+def split_at_nans(
+    points: Array, nan_run: int = 0, max_jump: float = math.inf
+) -> list[NDArray[np.intp]]:
+    """Indices of the clusters of finite points in a scan (N x 2): the paper's clusterByNaN.
+
+    With the defaults every invalid point splits, as in the paper: a depth camera's row is dense,
+    and a hole in it is an occlusion or glass. A real lidar drops single returns all along a
+    wall (a quarter of them on a cheap one), so for it runs of up to ``nan_run`` invalid points
+    do not split, and a jump of more than ``max_jump`` (m) between neighbours does.
+    """
+    index = np.flatnonzero(np.isfinite(points).all(axis=1))
+    if not len(index):
+        return []
+    skipped = np.diff(index) - 1
+    jumps = np.hypot(*np.diff(points[index], axis=0).T)
+    return np.split(index, np.flatnonzero((skipped > nan_run) | (jumps > max_jump)) + 1)
 
 
 def point_sigmas(points: Array, params: RansacParams) -> Array:
@@ -178,7 +195,7 @@ def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]
 def detect_lines(scan: Array, params: RansacParams, rng: np.random.Generator) -> list[LineFit]:
     """All wall lines of one scan row (N x 2, NaN where there is no point)."""
     lines: list[LineFit] = []
-    for cluster in split_at_nans(scan):
+    for cluster in split_at_nans(scan, params.nan_run, params.max_jump):
         if len(cluster) >= params.min_points:
             lines.extend(meet_at_corners(find_lines(scan[cluster], params, rng), params))
     return lines

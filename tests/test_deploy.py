@@ -6,6 +6,8 @@ as a process against a router on a free loopback port: the file cannot rot unnot
 
 from __future__ import annotations
 
+import json
+import math
 import re
 import struct
 import subprocess
@@ -13,9 +15,13 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from conftest import free_port, run_wallmap, wait_for_port
+
+from wallmap.common.evaluation import evaluate_map
+from wallmap.common.scene import load_truth, write_scene_bag
 
 pytestmark = pytest.mark.e2e
 
@@ -61,7 +67,8 @@ def compose_commands() -> dict[str, list[str]]:
 def test_compose_and_dockerfile_are_consistent():
     compose = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
     services = compose["services"]
-    assert set(services) == {"router", "mapper", "detector", "player"}
+    assert set(services) == {"router", "mapper", "detector", "odometry", "player"}
+    assert services["odometry"]["profiles"] == ["odometry"], "only for bags without poses"
     assert services["router"]["build"] == "."
     for name, svc in services.items():
         assert svc["image"] == "wallmap:latest", name
@@ -79,19 +86,30 @@ def test_compose_and_dockerfile_are_consistent():
         for name in copied.split():
             assert (ROOT / name).exists(), f"the Dockerfile copies {name}, which is missing"
     # The compose player reads the sample bag where the image has it: /app is the repo.
-    player_bag = services["player"]["command"][1]
+    player_bag = interpolate(services["player"]["command"][1], {})
     assert (ROOT / player_bag.removeprefix("/app/")).is_file()
+    assert "./bags:/bags:ro" in services["player"]["volumes"]
 
 
-def localise(command: list[str], endpoint: str, tmp_path: Path) -> list[str]:
+def interpolate(word: str, env: dict[str, str]) -> str:
+    """Compose's ``${NAME:-default}``, as docker-compose expands it from the environment."""
+    return re.sub(r"\$\{(\w+):-([^}]*)\}", lambda m: env.get(m[1]) or m[2], word)
+
+
+def localise(
+    command: list[str], endpoint: str, tmp_path: Path, env: dict[str, str] | None = None
+) -> list[str]:
     """Compose's container addresses and paths, as they are on this machine."""
     out = []
     for word in command:
-        arg = word.replace("tcp/router:7447", endpoint).replace("tcp/0.0.0.0:7447", endpoint)
+        arg = interpolate(word, env or {})
+        arg = arg.replace("tcp/router:7447", endpoint).replace("tcp/0.0.0.0:7447", endpoint)
         if arg.startswith("/data/"):
             arg = str(tmp_path / arg.removeprefix("/data/"))
         elif arg.startswith("/app/"):
             arg = str(ROOT / arg.removeprefix("/app/"))
+        elif arg.startswith("/bags/"):
+            arg = str(tmp_path / "bags" / arg.removeprefix("/bags/"))
         out.append(arg)
     return out
 
@@ -100,6 +118,7 @@ def test_compose_services_run_as_processes(tmp_path):
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     commands = {k: localise(v, endpoint, tmp_path) for k, v in compose_commands().items()}
+    del commands["odometry"]  # its profile is off by default
     procs: dict[str, subprocess.Popen[bytes]] = {}
     logs = {name: tmp_path / f"{name}.log" for name in commands}
 
@@ -128,3 +147,66 @@ def test_compose_services_run_as_processes(tmp_path):
                 procs[name].terminate()
                 procs[name].wait(timeout=15)
     assert (tmp_path / "map.json").exists()  # the mapper's state, on its /data volume
+
+
+def moved(wall: dict, pose: tuple[float, float, float]) -> dict:
+    """A wall record of the map reply, moved by a planar pose (its u, v recomputed)."""
+    x, y, yaw = pose
+    rot = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+    p0, p1 = (rot @ np.asarray(wall[k]) + (x, y) for k in ("p0", "p1"))
+    segments = np.asarray(wall["segments"]) @ rot.T + (x, y)
+    d = (p1 - p0) / np.linalg.norm(p1 - p0)
+    u, v = p0 - (p0 @ d) * d  # the line's closest point to the origin
+    return {
+        **wall,
+        "p0": p0.tolist(),
+        "p1": p1.tolist(),
+        "segments": segments.tolist(),
+        "u": float(u),
+        "v": float(v),
+    }
+
+
+def test_compose_odometry_profile_maps_a_bag_without_poses(tmp_path):
+    """`docker-compose --profile odometry up` with the documented variables, on a lidar bag."""
+    (tmp_path / "bags").mkdir()
+    info = write_scene_bag(
+        tmp_path / "bags" / "lidar.bag", seed=707, n_frames=200, fmt="ros1", sensor="laserscan"
+    )
+    env = {
+        "WALLMAP_BAG": "/bags/lidar.bag",
+        "WALLMAP_POSE_SOURCE": "none",
+        "WALLMAP_WAIT_FOR": "detector,mapper,odometry",
+    }
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    commands = {k: localise(v, endpoint, tmp_path, env) for k, v in compose_commands().items()}
+    procs = {}
+    try:
+        for name in ("router", "mapper", "detector", "odometry", "player"):
+            log = (tmp_path / f"{name}.log").open("wb")
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-m", "wallmap", *commands[name]], stdout=log, stderr=log
+            )
+            if name == "router":
+                wait_for_port(port)
+        player_log = tmp_path / "player.log"
+        assert procs["player"].wait(timeout=120) == 0, player_log.read_text()
+        assert "published 200 frames and 0 poses" in player_log.read_text()
+        query = run_wallmap("query", "--json", "--min-obs", "3", "--connect", endpoint, timeout=30)
+        assert query.returncode == 0, query.stderr
+        reply = json.loads(query.stdout)
+        assert reply["frames"] == 200
+        plan, trajectory, seen = load_truth(info.truth_path)
+        # The odometry frame starts at the first scan: place the map where that scan was taken.
+        score = evaluate_map([moved(w, trajectory.pose_at(0)) for w in reply["walls"]], plan, seen)
+        # Every wall found; on this short drive two corner slivers come out too, as they do
+        # with the same poses in one process (tests/test_odometry.py measures the accuracy).
+        assert score.recall >= 0.9, score.summary()
+        assert score.precision >= 0.8, score.summary()
+        assert score.median_offset_m < 0.02, score.summary()
+    finally:
+        for name in ("player", "odometry", "detector", "mapper", "router"):
+            if name in procs and procs[name].poll() is None:
+                procs[name].terminate()
+                procs[name].wait(timeout=15)

@@ -38,6 +38,8 @@ from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import FORMATS as POSE_FORMATS
 from wallmap.services.mapper.pose_input import make_pose_input
 from wallmap.services.mapper.state_file import StateError
+from wallmap.services.odometry import service as odometry_service
+from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
 
@@ -57,6 +59,18 @@ def _positive(value: str) -> float:
         msg = f"must be a positive number, got {value}"
         raise argparse.ArgumentTypeError(msg)
     return x
+
+
+def _pose(value: str) -> tuple[float, float, float]:
+    try:
+        x, y, yaw = (float(v) for v in value.split(","))
+    except ValueError:
+        msg = f"expected X,Y,YAW (metres, radians), got {value!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not all(map(math.isfinite, (x, y, yaw))):
+        msg = f"X,Y,YAW must be finite, got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return x, y, yaw
 
 
 def _band(value: str) -> tuple[float, float]:
@@ -105,6 +119,14 @@ def _cmd_mapper(args: argparse.Namespace) -> int:
     )
     mapper_service.run(
         settings_from_args(args, wait_for_router=math.inf), mapper, stop_on_signals()
+    )
+    return 0
+
+
+def _cmd_odometry(args: argparse.Namespace) -> int:
+    config = OdometryConfig(initial_pose=args.initial_pose, use_walls=not args.no_walls)
+    odometry_service.run(
+        settings_from_args(args, wait_for_router=math.inf), config, stop_on_signals()
     )
     return 0
 
@@ -164,7 +186,11 @@ def _cmd_up(args: argparse.Namespace) -> int:
         picture=args.picture,
         min_obs=args.min_obs,
         truth=args.truth,
+        odometry=args.odometry,
     )
+    if args.odometry and args.pose_source not in ("tf", "none"):
+        msg = f"--odometry estimates the poses itself; drop --pose-source {args.pose_source}"
+        raise PlayerError(msg)
     return up(settings, options)
 
 
@@ -294,6 +320,20 @@ def build_parser() -> argparse.ArgumentParser:
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_mapper)
 
+    p = sub.add_parser("odometry", help="poses from the sensor frames (scan matching)")
+    p.add_argument(
+        "--initial-pose",
+        type=_pose,
+        default=(0.0, 0.0, 0.0),
+        metavar="X,Y,YAW",
+        help="where the first scan was taken, in the map frame (default 0,0,0)",
+    )
+    p.add_argument(
+        "--no-walls", action="store_true", help="do not refine poses against the mapped walls"
+    )
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_odometry)
+
     p = sub.add_parser("query", help="print the current wall map")
     p.add_argument("--json", action="store_true", help="the contract's JSON instead of a table")
     p.add_argument(
@@ -306,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_query)
 
-    p = sub.add_parser("up", help="router + detector + mapper + player on one machine")
+    p = sub.add_parser("up", help="router + detector + mapper (+ odometry) + player, one machine")
     _add_bag_arguments(p)
     p.add_argument("--state", type=Path, metavar="FILE", help="the mapper's state file")
     p.add_argument("--exit-when-done", action="store_true", help="stop everything after the bag")
@@ -317,6 +357,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--truth", type=Path, metavar="FILE", help="score the map against a scene's truth"
+    )
+    p.add_argument(
+        "--odometry",
+        action="store_true",
+        help="estimate the poses from the scans (wallmap odometry), for bags without poses",
     )
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_up)
@@ -342,7 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the floor plan and the drive")
     p.add_argument("--frames", type=int, default=600, help="most frames (the drive may end first)")
     p.add_argument("--format", choices=("ros1", "ros2-mcap", "ros2-sqlite3"), default="ros1")
-    p.add_argument("--sensor", choices=("pointcloud", "depth16", "depth32"), default="pointcloud")
+    p.add_argument(
+        "--sensor", choices=("pointcloud", "depth16", "depth32", "laserscan"), default="pointcloud"
+    )
     p.add_argument("--width", type=int, default=160, help="image width (px)")
     p.add_argument("--height", type=int, default=120, help="image height (px)")
     p.add_argument("--rate", type=_positive, default=15.0, help="frames per second")

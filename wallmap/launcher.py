@@ -1,4 +1,4 @@
-"""``wallmap up`` and ``wallmap demo``: a router and the three services as processes, one command.
+"""``wallmap up`` and ``wallmap demo``: a router and the services as processes, one command.
 
 Each service runs as its own process, exactly as in ``docker-compose.yml``, so what works here
 works there. The player waits for the detector and mapper to be live before its first frame and,
@@ -44,6 +44,7 @@ class UpOptions:
     picture: Path | None = None
     min_obs: int = 3
     truth: Path | None = None
+    odometry: bool = False  # poses from the scans (wallmap odometry), for bags without poses
 
 
 def free_loopback_port() -> int:
@@ -83,8 +84,10 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
     env = {**os.environ, "WALLMAP_LOG": os.environ.get("WALLMAP_LOG", "WARNING")}
     mapper_args = ["mapper", *common] + (["--state", str(options.state)] if options.state else [])
     speed = ["--fast"] if options.fast else ["--rate", str(options.rate)]
-    player_args = ["player", str(options.bag), *speed, "--pose-source", options.pose_source]
-    player_args += ["--wait-for", "detector,mapper", *common]
+    pose_source = "none" if options.odometry else options.pose_source
+    services = ["detector", "mapper"] + (["odometry"] if options.odometry else [])
+    player_args = ["player", str(options.bag), *speed, "--pose-source", pose_source]
+    player_args += ["--wait-for", ",".join(services), *common]
     if options.sensor_topic:
         player_args += ["--sensor-topic", options.sensor_topic]
     stop = stop_on_signals()
@@ -93,6 +96,8 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
         procs.append(subprocess.Popen(_wallmap(*router_args), env=env))
         procs.append(subprocess.Popen(_wallmap(*mapper_args), env=env))
         procs.append(subprocess.Popen(_wallmap("detector", *common), env=env))
+        if options.odometry:
+            procs.append(subprocess.Popen(_wallmap("odometry", *common), env=env))
         player = subprocess.Popen(_wallmap(*player_args), env=env)
         procs.append(player)
         while player.poll() is None and not stop.is_set():

@@ -44,7 +44,9 @@ class MapperConfig:
             and without it a wall seen a hundred times would refuse the next good observation.
         merge_angle: two walls whose lines differ by less than this angle (rad)...
         merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
-            they merge, and the older id survives. 5 cm keeps the two faces of a real wall apart.
+            they merge, and the older id survives. 3 degrees and 10 cm is also the rule by which
+            two walls count as a duplicate (docs/real-data.md); the two faces of a wall thinner
+            than 10 cm, seen from both sides, become one.
         corner_reach: served ends of two confirmed walls that both lie this close (m) to where
             their lines cross meet there: each wall's extent overshoots a corner a little, where
             its detected lines took in points of the other wall.
@@ -54,6 +56,8 @@ class MapperConfig:
             along more than half of its length, is a shadow of it: a line blended across a
             shallow corner from far away. It is served as tentative.
         shadow_ratio: see above.
+        min_length: a wall whose served segments add up to less than this (m) is served as
+            tentative: the detector reports no shorter line, so such a wall is a sliver of one.
         confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
         confirm_views: ...from this many distinct viewpoints (moved ``view_distance`` or turned
             ``view_angle`` since the last one): one glimpse, however long, is not a wall.
@@ -64,13 +68,14 @@ class MapperConfig:
     gate: float = ekf.CHI2_2DOF_999
     max_extent_gap: float = 1.0
     pose_cov: Array = field(default_factory=_default_pose_cov)
-    merge_angle: float = np.radians(2.0)
-    merge_offset: float = 0.05
+    merge_angle: float = np.radians(3.0)
+    merge_offset: float = 0.10
     corner_reach: float = 0.4
     corner_angle: float = np.radians(3.0)
     shadow_angle: float = np.radians(5.0)
     shadow_offset: float = 0.10
     shadow_ratio: float = 3.0
+    min_length: float = 0.25
     confirm_obs: int = 3
     confirm_views: int = 2
     keyframe_distance: float = 0.1
@@ -427,7 +432,11 @@ class WallMap:
 
     def served(self, wall: Wall) -> bool:
         """Confirmed and not a shadow of another wall: what a reply holds by default."""
-        return wall.confirmed(self.config) and not self._shadowed(wall)
+        if not wall.confirmed(self.config):
+            return False
+        pieces = wall.segments()
+        length = float(np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum())
+        return length >= self.config.min_length and not self._shadowed(wall)
 
     def _selected(self, wall: Wall, query: MapQuery, served: dict[int, bool]) -> bool:
         served[wall.id] = self.served(wall)

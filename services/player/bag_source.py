@@ -68,10 +68,20 @@ def _one_line(err: BaseException) -> str:
 
 
 def _unreadable(path: Path, err: BaseException) -> PlayerError:
-    """The error for a bag rosbags fails on, with its reason kept as one line."""
+    """The error for a bag rosbags fails on, with its reason kept as one line.
+
+    Old or interrupted ROS 1 recorders leave bags whose index does not match their chunks (e.g.
+    the 2010 demo bag of laser_scan_matcher); ROS 1's own tools repair those, so say how.
+    """
+    repair = ""
+    if path.suffix == ".bag":
+        repair = (
+            f"; ROS 1 can often repair it: `rosbag reindex {path}` rebuilds a broken index, then "
+            f"`rosbag fix {path} fixed.bag` updates old message definitions (e.g. roslib/Header)"
+        )
     return PlayerError(
         f"cannot read bag {path}; it looks damaged or was written by an unsupported recorder "
-        f"({_one_line(err)})"
+        f"({_one_line(err)}){repair}"
     )
 
 

@@ -1,0 +1,1 @@
+"""The odometry service: robot poses estimated from the sensor frames themselves."""

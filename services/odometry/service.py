@@ -1,0 +1,136 @@
+"""The odometry service: poses from the sensor frames, for recordings that carry none.
+
+It listens to the same frames as the detector, turns each into its scan row (the detector's row
+choice), registers it (``PoseTracker``) and publishes the pose on ``{prefix}/pose`` at the
+frame's stamp, where the mapper waits for it. With ``--pose-source none`` on the player, a bag
+with nothing but a lidar or a depth camera makes a map. The walls the mapper confirms come back
+on ``{prefix}/map/updates`` (and one query at start) and hold the poses onto the map.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import zenoh
+
+from wallmap.common.codec import MessageError, decode
+from wallmap.common.messages import pack, unpack_frame
+from wallmap.common.runtime import Stats, drain, setup_logging
+from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.map_client import QueryError, fetch_map
+from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
+
+QUEUE_DEPTH = 8
+
+
+def run(
+    settings: ZenohSettings,
+    config: OdometryConfig,
+    stop: threading.Event,
+    rows: RowSelection | None = None,
+) -> Stats:
+    """Run until ``stop`` is set; returns the counters.
+
+    Args:
+        settings: The Zenoh session.
+        config: The tracker's tuning.
+        stop: Set to stop.
+        rows: How a depth frame becomes a scan row (the detector's choice by default).
+    """
+    log = setup_logging("odometry")
+    keys = Keys(settings.prefix)
+    stats = Stats(log)
+    tracker = PoseTracker(config)
+    rows = rows or RowSelection()
+    log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
+    with open_session(settings) as session:
+        publisher = session.declare_publisher(
+            keys.pose, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
+        updates = session.declare_subscriber(keys.map_updates, zenoh.handlers.FifoChannel(256))
+        token = session.liveliness().declare_token(keys.health("odometry"))
+        if config.use_walls:
+            _first_walls(session, keys, tracker, stats)
+        worker = threading.Thread(
+            target=_work,
+            args=(frames.handler, updates.handler, tracker, rows, publisher, stats),
+            daemon=True,
+        )
+        worker.start()
+        log.info(
+            "ready: %s -> %s (walls as landmarks: %s)",
+            keys.frames,
+            keys.pose,
+            "yes" if config.use_walls else "no",
+        )
+        stop.wait()
+        log.info("stopping: %s", stats.snapshot())
+        token.undeclare()
+        frames.undeclare()
+        updates.undeclare()
+        worker.join(timeout=5.0)
+    return stats
+
+
+def _first_walls(session: zenoh.Session, keys: Keys, tracker: PoseTracker, stats: Stats) -> None:
+    """The walls mapped before this service started (a restart, or a map kept in a state file)."""
+    try:
+        reply = fetch_map(session, keys, timeout=1.0)
+        tracker.set_walls(reply.get("walls", []))
+    except QueryError:
+        return  # no mapper yet: the walls come with its updates
+    except MessageError as err:
+        stats.refuse("map", str(err))
+
+
+def _take_updates(
+    channel: zenoh.handlers.Handler[zenoh.Sample], tracker: PoseTracker, stats: Stats
+) -> None:
+    if not tracker.config.use_walls:
+        while channel.try_recv() is not None:
+            pass
+        return
+    while (sample := channel.try_recv()) is not None:
+        try:
+            update = decode(sample.payload.to_bytes())
+            tracker.set_walls(update.get("walls", []), update.get("removed", []))
+        except (MessageError, AttributeError, TypeError, ValueError) as err:
+            stats.refuse("map update", str(err))
+
+
+def _work(
+    frames: zenoh.handlers.Handler[zenoh.Sample],
+    updates: zenoh.handlers.Handler[zenoh.Sample],
+    tracker: PoseTracker,
+    rows: RowSelection,
+    publisher: zenoh.Publisher,
+    stats: Stats,
+) -> None:
+    """A pose for every frame, in arrival order, until the subscriber is undeclared."""
+    for sample in drain(frames):
+        stats.add("received")
+        try:
+            frame = unpack_frame(sample.payload.to_bytes())
+        except MessageError as err:
+            stats.refuse("frame", str(err))
+            continue
+        if frame.sensor == "depth":
+            stats.note(
+                "depth_frames",
+                "depth",
+                "scan matching on a depth camera's row (about 60 degrees wide) is unreliable; "
+                "prefer a lidar, or give the player a pose source (docs/real-data.md)",
+            )
+        _take_updates(updates, tracker, stats)
+        scan = select_scan(frame.points, frame.base_from_sensor, rows)
+        estimate = tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp)
+        if not estimate.registration.accepted:
+            reason = estimate.registration.reason
+            stats.note("unmatched", reason, f"scan at {frame.stamp:.3f} not matched: {reason}")
+        if estimate.wall_points:
+            stats.add("wall_refined")
+        publisher.put(pack(estimate.pose))
+        stats.add("published")

@@ -1,0 +1,170 @@
+"""Where the robot is, from its own scans: scan matching, held onto the map by its walls. Pure.
+
+Recordings without poses (a lidar or camera and nothing else) still make a map: the scan matcher
+(``wallmap.common.scan_matching``) registers each scan against a local map of recent scans, in
+its own odometry frame, which drifts slowly. Beyond that, the walls the mapper has already
+confirmed are landmarks that do not drift: each scan is also registered against them, with the
+matcher's pose as a prior, and the difference becomes the correction ``map <- odom`` applied to
+the poses that follow. Where the walls say nothing (along a corridor), the prior keeps its word.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common.codec import MessageError
+from wallmap.common.messages import Pose
+from wallmap.common.scan_matching import (
+    MatcherConfig,
+    Registration,
+    ScanMatcher,
+    WallLine,
+    register_to_walls,
+)
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """Everything that tunes the pose service, in one place.
+
+    Attributes:
+        matcher: The scan matcher's tuning (also the wall registration's cut-offs).
+        initial_pose: (x, y, yaw) of the first scan in the map frame; the odometry frame starts
+            there (the origin, unless the start is known).
+        use_walls: Refine each pose against the walls already mapped.
+        wall_min_obs: Walls seen fewer times are not used (new walls are still settling).
+        min_wall_points: A wall registration matching fewer scan points is not used.
+        wall_prior_sigma: Smallest standard deviation (x, y in m, yaw in rad) given to the
+            matcher's pose as the walls' prior: the matcher's own covariance is that of one
+            registration, far tighter than the drift the walls are there to remove.
+    """
+
+    matcher: MatcherConfig = field(default_factory=MatcherConfig)
+    initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    use_walls: bool = True
+    wall_min_obs: int = 5
+    min_wall_points: int = 20
+    wall_prior_sigma: tuple[float, float, float] = (0.02, 0.02, math.radians(0.5))
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """One scan's outcome: the pose to publish and how it was reached."""
+
+    pose: Pose
+    registration: Registration
+    wall_points: int  # scan points matched to mapped walls (0: walls not used)
+
+
+def _se2(x: float, y: float, yaw: float) -> Array:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def _pose_of(t: Array) -> Array:
+    return np.array([t[0, 2], t[1, 2], math.atan2(t[1, 0], t[0, 0])])
+
+
+def _rotate_cov(cov: Array, yaw: float) -> Array:
+    """A pose covariance expressed in a frame turned by ``yaw``."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rot @ cov @ rot.T
+
+
+def wall_lines(record: Mapping[str, Any]) -> list[WallLine]:
+    """The lines of one wall of a map reply or update: one per served segment.
+
+    Raises:
+        MessageError: The record lacks segments or they are not finite 2-D points.
+    """
+    try:
+        segments = np.asarray(record["segments"], dtype=float).reshape(-1, 2, 2)
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"wall record without usable segments: {err}"
+        raise MessageError(msg) from err
+    if not np.isfinite(segments).all():
+        raise MessageError("wall record with non-finite segments")
+    return [WallLine.from_points(a, b) for a, b in segments if float(np.linalg.norm(b - a)) > 1e-3]
+
+
+class PoseTracker:
+    """Scan matching in an odometry frame, corrected onto the map by the mapped walls."""
+
+    def __init__(self, config: OdometryConfig | None = None) -> None:
+        self.config = config or OdometryConfig()
+        self.matcher = ScanMatcher(self.config.matcher)
+        self.map_from_odom = _se2(*self.config.initial_pose)
+        self._walls: dict[int, list[WallLine]] = {}
+
+    @property
+    def wall_count(self) -> int:
+        """Walls currently used as landmarks."""
+        return len(self._walls)
+
+    def set_walls(self, records: Iterable[Mapping[str, Any]], removed: Iterable[int] = ()) -> None:
+        """Take walls from a map reply or update; unsettled and tentative ones are left out.
+
+        Raises:
+            MessageError: A record is malformed (the others are still taken).
+        """
+        for wall_id in removed:
+            self._walls.pop(int(wall_id), None)
+        problem: MessageError | None = None
+        for record in records:
+            try:
+                wall_id = int(record["id"])
+                usable = int(record["n_obs"]) >= self.config.wall_min_obs
+                usable = usable and not record.get("tentative", False)
+                lines = wall_lines(record) if usable else []
+            except (KeyError, TypeError, ValueError, MessageError) as err:
+                problem = MessageError(f"malformed wall record: {err}")
+                continue
+            if lines:
+                self._walls[wall_id] = lines
+            else:
+                self._walls.pop(wall_id, None)
+        if problem is not None:
+            raise problem
+
+    def _walls_near(self, position: Array) -> list[WallLine]:
+        """Walls with a part within the matcher's range of a position."""
+        reach = self.config.matcher.max_range
+        near = []
+        for lines in self._walls.values():
+            for line in lines:
+                d = line.p1 - line.p0
+                t = float(np.clip((position - line.p0) @ d / (d @ d), 0.0, 1.0))
+                if float(np.linalg.norm(line.p0 + t * d - position)) <= reach:
+                    near.append(line)
+        return near
+
+    def update(self, points: Array, stamp: float, child: str = "base_link") -> Estimate:
+        """The pose of one scan (N x 2 points in the base frame, NaN rows allowed)."""
+        registration = self.matcher.update(points, stamp)
+        odom_pose = _se2(*registration.pose)
+        guess_t = self.map_from_odom @ odom_pose
+        guess = _pose_of(guess_t)
+        turn = math.atan2(self.map_from_odom[1, 0], self.map_from_odom[0, 0])
+        cov = _rotate_cov(registration.cov, turn)
+        matched = 0
+        walls = self._walls_near(guess[:2]) if self.config.use_walls and self._walls else []
+        if walls and registration.accepted:
+            prior = cov + np.diag(np.square(self.config.wall_prior_sigma))
+            refined, refined_cov, matched = register_to_walls(
+                points, guess, prior, walls, self.config.matcher
+            )
+            if matched >= self.config.min_wall_points:
+                refined_t = _se2(*refined)
+                self.map_from_odom = refined_t @ np.linalg.inv(odom_pose)
+                guess, cov = _pose_of(refined_t), refined_cov  # yaw wrapped to (-pi, pi]
+        pose = Pose(stamp, float(guess[0]), float(guess[1]), float(guess[2]), cov, "map", child)
+        return Estimate(pose, registration, matched)
