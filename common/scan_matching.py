@@ -513,7 +513,7 @@ def register_to_walls(
             if iteration <= config.coarse_iterations
             else config.fine_max_distance
         )
-        candidate = np.abs(distance)
+        candidate = np.where((along >= 0) & (along <= 1), np.abs(distance), np.inf)
         wall = candidate.argmin(axis=1)
         rows = np.arange(len(usable))
         found = candidate[rows, wall] < reach

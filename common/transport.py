@@ -181,6 +181,21 @@ class Keys:
         """Mapper acknowledgements of the frames of each player run."""
         return f"{self.prefix}/mapper/progress"
 
+    @property
+    def detector_diagnostics(self) -> str:
+        """Per frame, why the detector found the walls it found (or none)."""
+        return f"{self.prefix}/detector/diagnostics"
+
+    @property
+    def player_control(self) -> str:
+        """Queryable of the player: pause, resume, step, seek, rate."""
+        return f"{self.prefix}/player/control"
+
+    @property
+    def player_progress(self) -> str:
+        """The player's position in its bag, published as it plays."""
+        return f"{self.prefix}/player/progress"
+
     def health(self, service: str = "*") -> str:
         """Liveliness token of a running service."""
         return f"{self.prefix}/health/{service}"
