@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, replace
+from collections import Counter
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -137,8 +139,40 @@ def _segments(
     return done
 
 
-def find_lines(points: Array, params: RansacParams, rng: np.random.Generator) -> list[LineFit]:
+@dataclass
+class RowReport:
+    """Why a row gave the lines it gave: what the detector's diagnostics publish.
+
+    Attributes:
+        points: valid points in the row.
+        clusters: sizes of the clusters it was split into.
+        lines: per accepted line: points, length (m), direction sd (rad).
+        rejected: candidates turned down, by the threshold that turned them down.
+    """
+
+    points: int = 0
+    clusters: list[int] = field(default_factory=list)
+    lines: list[dict[str, float]] = field(default_factory=list)
+    rejected: Counter[str] = field(default_factory=Counter)
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "points": self.points,
+            "clusters": self.clusters,
+            "lines": self.lines,
+            "rejected": dict(self.rejected),
+        }
+
+
+def find_lines(
+    points: Array,
+    params: RansacParams,
+    rng: np.random.Generator,
+    report: RowReport | None = None,
+) -> list[LineFit]:
     """Sequential RANSAC over one cluster of finite points (N x 2)."""
+    rejected: Counter[str] = Counter() if report is None else report.rejected
     lines: list[LineFit] = []
     remaining = np.arange(len(points))
     sigmas_all = point_sigmas(points, params)
@@ -147,23 +181,30 @@ def find_lines(points: Array, params: RansacParams, rng: np.random.Generator) ->
         pts, sigmas, band = points[remaining], sigmas_all[remaining], band_all[remaining]
         mask = _best_hypothesis(pts, band, rng, params.iterations)
         if mask.sum() < params.min_points:
+            rejected["no line with min_points inliers"] += 1
             break
         normal, offset = line_through(pts[mask], sigmas[mask])
         # One refinement: the least-squares line picks up inliers the point pair missed.
         mask = np.abs(pts @ normal - offset) <= band
         if mask.sum() < params.min_points:
+            rejected["no line with min_points inliers"] += 1
             break
         taken = np.flatnonzero(mask)
         fit = fit_line(pts[taken], sigmas[taken], cov_scale=params.cov_scale)
         accepted = []
         for seg in _segments(fit, pts[taken], sigmas[taken], params):
             if len(seg) < params.min_points:
+                rejected["piece below min_points (cut at a gap or kink)"] += 1
                 continue
             idx = taken[seg]
             # A line not cut anywhere is the fit just made; only the pieces of a cut one are new.
             whole = len(seg) == len(taken)
             seg_fit = fit if whole else fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
-            if seg_fit.length >= params.min_length and seg_fit.angle_sd <= params.max_angle_sd:
+            if seg_fit.length < params.min_length:
+                rejected["shorter than min_length"] += 1
+            elif seg_fit.angle_sd > params.max_angle_sd:
+                rejected["direction less sure than max_angle_sd"] += 1
+            else:
                 lines.append(seg_fit)
             accepted.append(taken[seg])
         if not accepted:
@@ -192,10 +233,28 @@ def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]
     return lines
 
 
-def detect_lines(scan: Array, params: RansacParams, rng: np.random.Generator) -> list[LineFit]:
-    """All wall lines of one scan row (N x 2, NaN where there is no point)."""
+def detect_lines(
+    scan: Array,
+    params: RansacParams,
+    rng: np.random.Generator,
+    report: RowReport | None = None,
+) -> list[LineFit]:
+    """All wall lines of one scan row (N x 2, NaN where there is no point).
+
+    ``report``, when given, is filled with why the row gave these lines.
+    """
     lines: list[LineFit] = []
-    for cluster in split_at_nans(scan, params.nan_run, params.max_jump):
+    clusters = split_at_nans(scan, params.nan_run, params.max_jump)
+    for cluster in clusters:
         if len(cluster) >= params.min_points:
-            lines.extend(meet_at_corners(find_lines(scan[cluster], params, rng), params))
+            lines.extend(meet_at_corners(find_lines(scan[cluster], params, rng, report), params))
+        elif report is not None:
+            report.rejected["cluster below min_points"] += 1
+    if report is not None:
+        report.points = sum(len(c) for c in clusters)
+        report.clusters = [len(c) for c in clusters]
+        report.lines = [
+            {"points": line.n_points, "length": line.length, "angle_sd": line.angle_sd}
+            for line in lines
+        ]
     return lines

@@ -14,6 +14,9 @@ from typing import TypeVar
 
 import zenoh
 
+from wallmap.common.codec import encode
+from wallmap.common.transport import Keys
+
 log = logging.getLogger("wallmap")
 T = TypeVar("T")
 
@@ -63,6 +66,32 @@ class Stats:
         """A copy of all counters."""
         with self._lock:
             return dict(self._counts)
+
+
+class Presence:
+    """A service's liveliness token and its counters' queryable: what ``wallmap status`` reads.
+
+    Both stay declared while this object lives; ``undeclare`` ends them at shutdown.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Keys, service: str, stats: Stats) -> None:
+        self._service, self._stats, self._started = service, stats, time.time()
+        self.token = session.liveliness().declare_token(keys.health(service))
+        # Replying to the query at hand from its callback is quick: one locked copy.
+        self.queryable = session.declare_queryable(keys.stats(service), self._reply)
+
+    def _reply(self, query: zenoh.Query) -> None:
+        body = {
+            "service": self._service,
+            "uptime": time.time() - self._started,
+            "counters": self._stats.snapshot(),
+        }
+        query.reply(query.key_expr, encode(body))
+
+    def undeclare(self) -> None:
+        """Leave: the service no longer shows as live."""
+        self.token.undeclare()
+        self.queryable.undeclare()
 
 
 def stop_on_signals() -> threading.Event:

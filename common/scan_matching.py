@@ -310,10 +310,14 @@ def _align(local_map: _LocalMap, points: Array, prediction: Array, config: Match
 class ScanMatcher:
     """Odometry from a stream of 2-D scans: each scan is matched against a local map.
 
-    The odometry frame is the base frame at the first usable scan. Each scan is predicted
-    with constant velocity, registered by point-to-line ICP against the last
-    ``config.keyframes`` keyframes, checked against the step gate, and becomes a keyframe
-    when it has moved far enough from the last one. Not thread-safe: one instance per stream.
+    The odometry frame is the base frame at the first usable scan. Each scan is predicted by
+    repeating the last accepted step in the base frame (a robot's constant twist), registered
+    by point-to-line ICP against the last ``config.keyframes`` keyframes, checked against the
+    step gate, and becomes a keyframe when it has moved far enough from the last one.
+
+    A rejected scan changes neither the map nor the velocity, so a few bad scans are bridged;
+    a matcher that keeps rejecting (the sensor was carried elsewhere) dead-reckons and does not
+    recover by itself. Not thread-safe: one instance per stream.
     """
 
     def __init__(self, config: MatcherConfig = MatcherConfig()) -> None:

@@ -196,6 +196,10 @@ class Keys:
         """The player's position in its bag, published as it plays."""
         return f"{self.prefix}/player/progress"
 
+    def stats(self, service: str = "*") -> str:
+        """Queryable of a running service: its counters, for ``wallmap status``."""
+        return f"{self.prefix}/stats/{service}"
+
     def health(self, service: str = "*") -> str:
         """Liveliness token of a running service."""
         return f"{self.prefix}/health/{service}"

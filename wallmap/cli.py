@@ -42,6 +42,8 @@ from wallmap.services.odometry import service as odometry_service
 from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
+from wallmap.status import fetch_status, format_status
+from wallmap.status import to_json as status_json
 
 FAILURES = (TransportError, PlayerError, TfError, StateError, QueryError, OSError, ValueError)
 
@@ -59,6 +61,14 @@ def _positive(value: str) -> float:
         msg = f"must be a positive number, got {value}"
         raise argparse.ArgumentTypeError(msg)
     return x
+
+
+def _non_negative(value: str) -> float:
+    number = float(value)
+    if not math.isfinite(number) or number < 0:
+        msg = f"must be a number >= 0, got {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return number
 
 
 def _pose(value: str) -> tuple[float, float, float]:
@@ -145,6 +155,11 @@ def _cmd_player(args: argparse.Namespace) -> int:
         else (),
         wait_timeout=args.wait_timeout,
         whole_clouds=args.whole_clouds,
+        start=args.start,
+        duration=args.duration,
+        loop=args.loop,
+        topics=tuple(filter(None, args.topics.split(","))) if args.topics else None,
+        paused=args.paused,
     )
     settings = settings_from_args(args, wait_for_router=args.wait_timeout)
     result = player_service.run(settings, player, stop_on_signals())
@@ -169,6 +184,14 @@ def _fetch(args: argparse.Namespace, **parameters: object) -> dict[str, object]:
 def _cmd_query(args: argparse.Namespace) -> int:
     reply = _fetch(args, bbox=args.bbox, since=args.since)
     print(to_json(reply) if args.json else format_table(reply))
+    return 0
+
+
+def _cmd_status(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args, wait_for_router=0.0)
+    with open_session(settings) as session:
+        services = fetch_status(session, Keys(settings.prefix), timeout=args.timeout)
+    print(status_json(services) if args.json else format_status(services, settings.prefix))
     return 0
 
 
@@ -269,6 +292,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="send whole clouds, not only the row the detector asks for (e.g. to record them)",
     )
+    p.add_argument("--start", type=_non_negative, default=0.0, help="begin S seconds into the bag")
+    p.add_argument("--duration", type=_positive, help="play S seconds of the bag")
+    p.add_argument("--loop", action="store_true", help="start over at the end, until stopped")
+    p.add_argument("--topics", metavar="T1,T2", help="read only these topics (sensor, tf, poses)")
+    p.add_argument(
+        "--paused", action="store_true", help="start paused (resume or step: keys or control)"
+    )
     p.add_argument(
         "--wait-for",
         metavar="SERVICES",
@@ -345,6 +375,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper")
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_query)
+
+    p = sub.add_parser("status", help="the live services and their counters")
+    p.add_argument("--json", action="store_true", help="JSON instead of a table")
+    p.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for answers")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=_cmd_status)
 
     p = sub.add_parser("up", help="router + detector + mapper (+ odometry) + player, one machine")
     _add_bag_arguments(p)

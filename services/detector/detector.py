@@ -10,7 +10,7 @@ import numpy as np
 
 from wallmap.common.line_fit import LineFit
 from wallmap.common.messages import Frame, Observations, WallObservation
-from wallmap.common.ransac import RansacParams, detect_lines
+from wallmap.common.ransac import RansacParams, RowReport, detect_lines
 from wallmap.common.scan_row import RowSelection, select_scan
 
 # A 2-D lidar: ~1 cm noise, constant with range; single dropped returns do not split a wall.
@@ -69,15 +69,22 @@ class WallDetector:
         self._rng = np.random.default_rng(config.seed)
         self.noise = {"depth": NoiseLevel(), "scan": NoiseLevel()}
 
-    def detect(self, frame: Frame) -> Observations:
-        """All walls seen in one frame (an empty list when there are none)."""
+    def detect(self, frame: Frame, report: RowReport | None = None) -> Observations:
+        """All walls seen in one frame (an empty list when there are none).
+
+        ``report``, when given, is filled with why (see ``RowReport``).
+        """
         scan = select_scan(frame.points, frame.base_from_sensor, self.config.rows)
         is_scanner = frame.sensor == "scan"
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = replace(base, noise_scale=base.noise_scale * noise.scale)
-        lines = detect_lines(scan, params, self._rng)
+        lines = detect_lines(scan, params, self._rng, report)
         noise.learn(lines)
+        if report is not None:
+            near = sum(1 for line in lines if line.offset < self.config.min_distance)
+            if near:
+                report.rejected["closer than min_distance"] += near
         walls = [
             WallObservation(
                 closest=line.closest,

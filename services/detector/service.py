@@ -14,7 +14,8 @@ import zenoh
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.messages import pack, unpack_frame
-from wallmap.common.runtime import Stats, drain, setup_logging
+from wallmap.common.ransac import RowReport
+from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
@@ -33,14 +34,17 @@ def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) 
         publisher = session.declare_publisher(
             keys.observations, congestion_control=zenoh.CongestionControl.BLOCK
         )
+        diagnostics = session.declare_publisher(keys.detector_diagnostics)
         subscriber = session.declare_subscriber(
             keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
         )
         rows = session.declare_queryable(keys.detector_rows)
-        token = session.liveliness().declare_token(keys.health("detector"))
+        token = Presence(session, keys, "detector", stats)
         workers = [
             threading.Thread(
-                target=_work, args=(subscriber.handler, detector, publisher, stats), daemon=True
+                target=_work,
+                args=(subscriber.handler, detector, publisher, diagnostics, stats),
+                daemon=True,
             ),
             threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True),
         ]
@@ -68,9 +72,14 @@ def _work(
     channel: zenoh.handlers.Handler[zenoh.Sample],
     detector: WallDetector,
     publisher: zenoh.Publisher,
+    diagnostics: zenoh.Publisher,
     stats: Stats,
 ) -> None:
-    """Detect walls in every frame until the subscriber is undeclared."""
+    """Detect walls in every frame until the subscriber is undeclared.
+
+    Each frame's diagnostics (points, clusters, lines, what was turned down and why) go out on
+    their own key; Zenoh sends nothing when nobody listens.
+    """
     for sample in drain(channel):
         stats.add("received")
         try:
@@ -78,7 +87,21 @@ def _work(
         except MessageError as err:
             stats.refuse("frame", str(err))
             continue
-        observations = detector.detect(frame)
+        report = RowReport()
+        observations = detector.detect(frame, report)
         publisher.put(pack(observations))
+        diagnostics.put(
+            encode(
+                {
+                    "run": frame.run,
+                    "seq": frame.seq,
+                    "stamp": frame.stamp,
+                    "sensor": frame.sensor,
+                    "walls": len(observations.walls),
+                    "noise_scale": detector.noise[frame.sensor].scale,
+                    **report.to_map(),
+                }
+            )
+        )
         stats.add("published")
         stats.add("walls", len(observations.walls))

@@ -21,7 +21,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.messages import Observations, Progress, pack, unpack_observations
-from wallmap.common.runtime import Stats, drain, setup_logging
+from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
@@ -144,7 +144,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
         ]
         for worker in workers:
             worker.start()
-        token = session.liveliness().declare_token(keys.health("mapper"))
+        token = Presence(session, keys, "mapper", stats)
         log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
         while not stop.wait(mapper.save_every):
             _save(core, mapper.state)

@@ -16,7 +16,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import pack, unpack_frame
-from wallmap.common.runtime import Stats, drain, setup_logging
+from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import QueryError, fetch_map
@@ -51,7 +51,7 @@ def run(
         )
         frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
         updates = session.declare_subscriber(keys.map_updates, zenoh.handlers.FifoChannel(256))
-        token = session.liveliness().declare_token(keys.health("odometry"))
+        token = Presence(session, keys, "odometry", stats)
         if config.use_walls:
             _first_walls(session, keys, tracker, stats)
         worker = threading.Thread(

@@ -161,6 +161,7 @@ class BagSource:
         sensor_topic: str | None = None,
         pose_source: str = "tf",
         base_frame: str | None = None,
+        topics: Iterable[str] | None = None,
     ) -> None:
         """Open the bag and resolve the sensor topic, pose source and sensor mounting.
 
@@ -170,6 +171,8 @@ class BagSource:
             pose_source: A ``--pose-source`` spec (see ``parse_pose_source``).
             base_frame: Robot frame; defaults to the pose source's child frame (``base_link``
                 for tf, pose, tum and none; the odometry's child frame for odom).
+            topics: Read only these topics (leading '/' optional), as ``ros2 bag play --topics``:
+                the sensor topic, tf and pose topics are looked for among them.
 
         Raises:
             PlayerError: Unreadable bag, no usable (or an ambiguous) sensor topic, a bad pose
@@ -180,16 +183,27 @@ class BagSource:
         self.warnings: list[str] = []
         self._reader = _open_reader(self.path)
         try:
-            self._setup(sensor_topic, base_frame)
+            self._setup(sensor_topic, base_frame, topics)
         except BaseException:
             self._reader.close()
             raise
 
-    def _setup(self, sensor_topic: str | None, base_frame: str | None) -> None:
+    def _setup(
+        self, sensor_topic: str | None, base_frame: str | None, topics: Iterable[str] | None
+    ) -> None:
         """Resolve everything ``frames()`` needs; split from __init__ so failures close the bag."""
         self._topics = {
             name: info for name, info in self._reader.topics.items() if info.msgtype is not None
         }
+        if topics is not None:
+            wanted = {t.lstrip("/") for t in topics}
+            unknown = wanted - {name.lstrip("/") for name in self._topics}
+            if unknown:
+                raise PlayerError(
+                    f"--topics names {', '.join(sorted(unknown))}, not in {self.path} "
+                    f"(topics: {self._listing()})"
+                )
+            self._topics = {n: i for n, i in self._topics.items() if n.lstrip("/") in wanted}
         self._first: dict[str, Any] = {}
         self.sensor_topic = self._resolve_sensor(sensor_topic)
         self.sensor_type: str = self._topics[self.sensor_topic].msgtype or ""
@@ -439,38 +453,57 @@ class BagSource:
         return dataclasses.replace(moved, cov=pose.cov)
 
     def _messages(
-        self, connections: Iterable[Connection], *, mapped: bool = False
+        self,
+        connections: Iterable[Connection],
+        *,
+        mapped: bool = False,
+        start: int | None = None,
+        stop: int | None = None,
     ) -> Iterator[tuple[Connection, int, Any]]:
         """Deserialized messages of some connections in bag order; errors become PlayerError.
 
         With ``mapped``, messages of an uncompressed ROS 1 bag are views over the mapped file
-        (see ``mapped_bag``): for large clouds of which only some rows are read.
+        (see ``mapped_bag``): for large clouds of which only some rows are read. ``start`` and
+        ``stop`` (bag time, ns) keep the messages received in ``[start, stop)``.
         """
         connections = list(connections)
         if not connections:
             return
         try:
-            raws = mapped_messages(self._reader, connections) if mapped else None
+            raws = mapped_messages(self._reader, connections, start, stop) if mapped else None
             if raws is None:
-                raws = self._reader.messages(connections=connections)
+                raws = self._reader.messages(connections=connections, start=start, stop=stop)
             for connection, receive_ns, raw in raws:
                 yield connection, receive_ns, self._reader.deserialize(raw, connection.msgtype)
         except Exception as err:  # damaged chunks surface as assorted library errors
             raise _unreadable(self.path, err) from err
 
-    def frames(self, rows: RowSelection | None = None) -> Iterator[tuple[SensorFrame, Pose | None]]:
+    def frames(
+        self,
+        rows: RowSelection | None = None,
+        start: float | None = None,
+        stop: float | None = None,
+    ) -> Iterator[tuple[SensorFrame, Pose | None]]:
         """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
 
         Args:
             rows: Hand out only the scan row this selection picks, as a (1, w, 3) grid, reading
                 only the image rows it searches (``rows_to_search``): decoding whole clouds is
                 most of a player's time. None hands out every row.
+            start: Seconds from the bag's start: the first message received then or later.
+            stop: Seconds from the bag's start: messages received before it only.
 
         Raises:
             PlayerError: A message cannot be read or decoded (its index is named).
         """
         connections = self._topics[self.sensor_topic].connections
-        for index, (_, receive_ns, msg) in enumerate(self._messages(connections, mapped=True)):
+        begin = self._reader.start_time
+        window = {
+            "start": None if start is None else begin + round(start * 1e9),
+            "stop": None if stop is None else begin + round(stop * 1e9),
+        }
+        messages = self._messages(connections, mapped=True, **window)
+        for index, (_, receive_ns, msg) in enumerate(messages):
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
             try:
@@ -485,7 +518,8 @@ class BagSource:
                 points = invalid_to_nan(points)
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
-            yield SensorFrame(stamp, frame_id, points, mount), self._pose_at(stamp)
+            bag_time = (receive_ns - begin) * 1e-9
+            yield SensorFrame(stamp, frame_id, points, mount, bag_time), self._pose_at(stamp)
 
     # --- bookkeeping --------------------------------------------------------------------------
 

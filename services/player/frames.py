@@ -15,9 +15,11 @@ class SensorFrame:
         points: float32 (rows, w, 3) points in the sensor frame (every row, or those the player
             asked for); NaN marks pixels without a return.
         T_base_sensor: float64 4x4 transform mapping sensor-frame points into the base frame.
+        bag_time: When the bag received it, seconds from the bag's start (for playback).
     """
 
     stamp: float
     frame_id: str
     points: np.ndarray
     T_base_sensor: np.ndarray
+    bag_time: float = 0.0

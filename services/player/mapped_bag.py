@@ -28,16 +28,24 @@ _MSGDATA, _CONNECTION = b"\x02", b"\x07"  # record "op" codes of the bag format 
 
 
 def mapped_messages(
-    reader: AnyReader, connections: Sequence[Connection]
+    reader: AnyReader,
+    connections: Sequence[Connection],
+    start: int | None = None,
+    stop: int | None = None,
 ) -> Iterator[tuple[Connection, int, memoryview]] | None:
     """(connection, stamp ns, raw message view) in time order, or None for bags it cannot map.
 
-    Only a single uncompressed ROS 1 bag qualifies; the caller then reads with rosbags.
+    Only a single uncompressed ROS 1 bag qualifies; the caller then reads with rosbags. As with
+    rosbags, ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``.
     """
     if len(reader.readers) != 1 or not isinstance(reader.readers[0], Reader1):
         return None
     bag = reader.readers[0]
-    entries = list(heapq.merge(*(bag.indexes[c.id] for c in connections)))
+    entries = [
+        entry
+        for entry in heapq.merge(*(bag.indexes[c.id] for c in connections))
+        if (start is None or entry.time >= start) and (stop is None or entry.time < stop)
+    ]
     plain = decompressors["none"]
     if any(bag.chunks[entry.chunk_pos].decompressor is not plain for entry in entries):
         return None

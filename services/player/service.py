@@ -1,6 +1,8 @@
 """The player service: a bag's sensor frames and poses, published over Zenoh.
 
-At ``--rate X`` it keeps the bag's timing, scaled. With ``--fast`` it publishes as fast as the
+At ``--rate X`` it keeps the bag's timing, scaled; it can be paused, stepped, sought and sped up
+through ``{prefix}/player/control`` or keys on a terminal, and says where it is on
+``{prefix}/player/progress``. With ``--fast`` it publishes as fast as the
 pipeline takes it and loses nothing: it keeps at most ``window`` frames in flight, counting the
 frames the mapper acknowledges for this run on the progress key. Before the first frame it waits
 for the services it feeds (their liveliness tokens), so no frame goes out to nobody.
@@ -14,19 +16,23 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
 from wallmap.common.allocator import keep_large_buffers
-from wallmap.common.codec import MessageError, decode
+from wallmap.common.codec import MessageError, decode, encode
 from wallmap.common.messages import Frame, pack, unpack_progress
-from wallmap.common.runtime import setup_logging
+from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.player.bag_source import LASERSCAN, BagSource
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.playback import Playback
+from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
 POLL = 0.001  # s between checks of the acknowledgement channel
+PROGRESS_PERIOD = 0.2  # s between progress messages
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,11 @@ class PlayerSettings:
         wait_timeout: how long to wait for them (s).
         stall_timeout: with ``fast``, how long without an acknowledgement is a failure (s).
         whole_clouds: send whole clouds instead of only the row the detector asks for.
+        start: begin this many seconds into the bag.
+        duration: play this many seconds of the bag (None: to the end).
+        loop: start over at the end, until stopped.
+        topics: read only these topics (None: all).
+        paused: start paused (step or resume through the controls).
     """
 
     bag: Path
@@ -56,6 +67,11 @@ class PlayerSettings:
     wait_timeout: float = 30.0
     stall_timeout: float = 30.0
     whole_clouds: bool = False
+    start: float = 0.0
+    duration: float | None = None
+    loop: bool = False
+    topics: tuple[str, ...] | None = None
+    paused: bool = False
 
 
 @dataclass(frozen=True)
@@ -160,14 +176,51 @@ class _ProgressLine:
         print(f"\r[{bar}] {done}/{self.total} frames", end=end, file=sys.stderr, flush=True)
 
 
+def _control(
+    channel: zenoh.handlers.Handler[zenoh.Query], playback: Playback, state: dict[str, Any]
+) -> None:
+    """Answer ``{prefix}/player/control?cmd=C``: pause, resume, step, seek (t=S), rate (x=F).
+
+    Every reply is the playback's state (also for ``cmd=status``), as on the progress key.
+    """
+    for query in drain(channel):
+        with query:
+            params = dict(query.parameters)
+            command = params.get("cmd", "status")
+            try:
+                if command == "pause":
+                    playback.pause()
+                elif command == "resume":
+                    playback.resume()
+                elif command == "step":
+                    playback.pause()
+                    playback.step()
+                elif command == "seek":
+                    playback.seek(float(params["t"]))
+                elif command == "rate":
+                    playback.set_rate(float(params["x"]))
+                elif command != "status":
+                    msg = (
+                        f"unknown cmd {command!r}: pause, resume, step, seek&t=S, rate&x=F, status"
+                    )
+                    raise ValueError(msg)
+            except (KeyError, ValueError) as err:
+                query.reply_err(f"player control: {err}")
+                continue
+            query.reply(query.key_expr, encode({**state, **playback.status()}))
+
+
 def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) -> PlayResult:
-    """Play the bag once; raises PlayerError (or TransportError) with a readable message."""
+    """Play the bag once (or in a loop); raises PlayerError (or TransportError) with a reason."""
     log = setup_logging("player")
     keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
     with BagSource(
-        player.bag, sensor_topic=player.sensor_topic, pose_source=player.pose_source
+        player.bag,
+        sensor_topic=player.sensor_topic,
+        pose_source=player.pose_source,
+        topics=player.topics,
     ) as bag:
         for warning in bag.warnings:
             log.warning("%s", warning)
@@ -183,6 +236,7 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             block = zenoh.CongestionControl.BLOCK
             frames_pub = session.declare_publisher(keys.frames, congestion_control=block)
             pose_pub = session.declare_publisher(keys.pose, congestion_control=block)
+            progress_pub = session.declare_publisher(keys.player_progress)
             progress_sub = session.declare_subscriber(
                 keys.progress, zenoh.handlers.FifoChannel(256)
             )
@@ -193,38 +247,63 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             log.info(
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )
+            playback = Playback(player.rate, fast=player.fast, paused=player.paused)
+            state: dict[str, Any] = {
+                "run": run_id, "published": 0, "frames": bag.frame_count,
+                "duration": bag.duration, "bag": str(player.bag),
+            }  # fmt: skip
+            control = session.declare_queryable(keys.player_control, zenoh.handlers.FifoChannel(16))
+            threading.Thread(
+                target=_control, args=(control.handler, playback, state), daemon=True
+            ).start()
             bar = _ProgressLine(bag.frame_count)
             published = poses = 0
             start_wall = time.monotonic()
-            first_stamp: float | None = None
-            for frame, pose in bag.frames(rows):
-                if stop.is_set():
-                    break
-                if player.fast:
-                    acks.wait_until(published - player.window + 1, player.stall_timeout, stop)
-                else:
-                    first_stamp = frame.stamp if first_stamp is None else first_stamp
-                    due = start_wall + (frame.stamp - first_stamp) / player.rate
-                    stop.wait(max(0.0, due - time.monotonic()))
-                if pose is not None:
-                    pose_pub.put(pack(pose))
-                    poses += 1
-                message = Frame(
-                    run_id,
-                    published,
-                    frame.stamp,
-                    frame.frame_id,
-                    frame.points,
-                    frame.T_base_sensor,
-                    sensor,
-                )
-                frames_pub.put(pack(message))
-                published += 1
-                bar.update(published)
+            last_progress = 0.0
+            stop_at = None if player.duration is None else player.start + player.duration
+            position = player.start
+            with terminal_keys(playback, stop) as interactive:
+                if interactive:
+                    print(HELP, file=sys.stderr)
+                while not stop.is_set():
+                    seek = None
+                    for frame, pose in bag.frames(rows, start=position, stop=stop_at):
+                        turn = playback.wait_turn(frame.bag_time, stop)
+                        if stop.is_set():
+                            break
+                        if turn.seek is not None:
+                            seek = turn.seek
+                            break
+                        if player.fast:
+                            acks.wait_until(
+                                published - player.window + 1, player.stall_timeout, stop
+                            )
+                        if pose is not None:
+                            pose_pub.put(pack(pose))
+                            poses += 1
+                        message = Frame(
+                            run_id, published, frame.stamp, frame.frame_id, frame.points,
+                            frame.T_base_sensor, sensor,
+                        )  # fmt: skip
+                        frames_pub.put(pack(message))
+                        published += 1
+                        state["published"] = published
+                        bar.update(published)
+                        if time.monotonic() - last_progress >= PROGRESS_PERIOD:
+                            last_progress = time.monotonic()
+                            progress_pub.put(encode({**state, **playback.status()}))
+                    if seek is not None:
+                        position = seek
+                    elif player.loop and not stop.is_set():
+                        position = player.start
+                    else:
+                        break
             bar.update(published, force=True)
             if player.fast or "mapper" in player.wait_for:
                 acks.wait_until(published, player.stall_timeout, stop)
             seconds = time.monotonic() - start_wall
+            progress_pub.put(encode({**state, **playback.status(), "state": "done"}))
+            control.undeclare()
             progress_sub.undeclare()
     waited = player.fast or "mapper" in player.wait_for
     return PlayResult(published, poses, seconds, acks.integrated if waited else None)

@@ -1,0 +1,65 @@
+"""The detector says per frame why it found the walls it found, or none."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from wallmap.common.codec import decode
+from wallmap.common.messages import Frame, pack
+from wallmap.common.ransac import RansacParams, RowReport, detect_lines
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+
+
+def _row() -> np.ndarray:
+    """A 3 m wall 2 m ahead, a NaN, a 10 cm stub of 15 points, a NaN, and 5 stray points."""
+    rng = np.random.default_rng(4)
+    wall = np.column_stack([np.full(150, 2.0), np.linspace(-1.5, 1.5, 150)])
+    stub = np.column_stack([np.full(15, 3.0), np.linspace(2.0, 2.1, 15)])
+    strays = rng.uniform(4, 5, (5, 2))
+    gap = np.full((1, 2), np.nan)
+    row = np.vstack([wall, gap, stub, gap, strays])
+    return row + rng.normal(0, 0.002, row.shape) * [1, 0]
+
+
+def test_row_report_names_the_thresholds() -> None:
+    report = RowReport()
+    lines = detect_lines(_row(), RansacParams(), np.random.default_rng(0), report)
+    assert len(lines) == 1
+    assert report.points == 170
+    assert report.clusters == [150, 15, 5]
+    assert report.lines[0]["points"] >= 140
+    assert report.lines[0]["length"] == pytest.approx(3.0, abs=0.05)
+    assert report.rejected["shorter than min_length"] == 1  # the stub
+    assert report.rejected["cluster below min_points"] == 1  # the strays
+    assert set(report.to_map()) == {"points", "clusters", "lines", "rejected"}
+
+
+@pytest.mark.e2e
+def test_detector_publishes_diagnostics_per_frame(stack) -> None:
+    keys = Keys(stack.prefix)
+    settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    row = _row()
+    points = np.column_stack([row, np.zeros(len(row))]).astype(np.float32)[None]
+    with open_session(settings) as session:
+        diagnostics = session.declare_subscriber(
+            keys.detector_diagnostics, zenoh.handlers.FifoChannel(16)
+        )
+        frames = session.declare_publisher(keys.frames)
+        received = None
+        for seq in range(200):  # until the detector is up and listening
+            frames.put(pack(Frame("diag", seq, 1.0 + seq, "camera", points, np.eye(4), "depth")))
+            time.sleep(0.1)
+            if (received := diagnostics.handler.try_recv()) is not None:
+                break
+    assert received is not None, "no diagnostics"
+    message = decode(received.payload.to_bytes())
+    assert message["run"] == "diag"
+    assert message["sensor"] == "depth"
+    assert message["walls"] == 1
+    assert message["clusters"] == [150, 15, 5]
+    assert message["rejected"]["cluster below min_points"] == 1
