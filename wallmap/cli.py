@@ -28,7 +28,9 @@ from wallmap.common.transport import (
     open_session,
     settings_from_args,
 )
+from wallmap.doctor import add_command as add_doctor_command
 from wallmap.export import write_geojson
+from wallmap.foxglove_cli import add_commands as add_foxglove_commands
 from wallmap.launcher import UpOptions, demo, up
 from wallmap.map_client import QueryError, fetch_map, format_table, to_json
 from wallmap.plot import write_picture
@@ -437,6 +439,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("wallmap-demo.png"), help="picture (.png or .svg)"
     )
     p.set_defaults(func=_cmd_demo)
+    add_foxglove_commands(sub)
+    add_doctor_command(sub)
     return parser
 
 

@@ -1,0 +1,291 @@
+"""Wallmap's messages as Foxglove messages, so Foxglove's 3D panel draws a run.
+
+Pure conversion, no Zenoh: :class:`Bridge` takes decoded wallmap messages (poses, observations,
+map replies and updates) and returns the Foxglove messages to log, each with its topic and its
+log time (the wallmap message's stamp). ``wallmap record`` writes them to an MCAP file and
+``wallmap foxglove`` serves them live (``wallmap/foxglove_cli.py``). Importing this module needs
+the ``foxglove`` extra (``foxglove-sdk``). Topics and schemas: ``docs/foxglove.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import Any, NamedTuple
+
+from foxglove import Context
+from foxglove.channels import (
+    FrameTransformsChannel,
+    PoseInFrameChannel,
+    PosesInFrameChannel,
+    SceneUpdateChannel,
+)
+from foxglove.messages import (
+    Color,
+    FrameTransform,
+    FrameTransforms,
+    KeyValuePair,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    PoseInFrame,
+    PosesInFrame,
+    Quaternion,
+    SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
+    SceneUpdate,
+    TextPrimitive,
+    Timestamp,
+    Vector3,
+)
+
+from wallmap.common import messages
+from wallmap.services.mapper.pose_buffer import PoseBuffer
+
+WALLS = "/wallmap/walls"
+POSE = "/wallmap/pose"
+TF = "/tf"
+OBSERVATIONS = "/wallmap/observations"
+TRAJECTORY = "/wallmap/trajectory"
+LATCHED = (WALLS, TRAJECTORY)  # state rather than a stream: a viewer that connects late needs it
+
+CONFIRMED = Color(r=0.25, g=0.55, b=1.0, a=1.0)
+TENTATIVE = Color(r=1.0, g=0.6, b=0.1, a=0.6)  # possible phantoms: paler, so they stand out
+OBSERVED = Color(r=0.2, g=0.9, b=0.3, a=1.0)
+LABEL = Color(r=0.9, g=0.9, b=0.9, a=1.0)
+WALL_THICKNESS = 0.05  # m
+OBSERVATION_THICKNESS = 0.03  # m
+OBSERVATION_HEIGHT = 0.02  # m above the walls, so a seen wall is not hidden under its map line
+
+
+class Out(NamedTuple):
+    """One Foxglove message to log: its topic, the message, and its log time (ns)."""
+
+    topic: str
+    message: Any
+    log_time: int
+
+
+def make_channels(context: Context) -> dict[str, Any]:
+    """One typed channel per topic, bound to ``context`` (an MCAP writer's or a server's)."""
+    return {
+        WALLS: SceneUpdateChannel(WALLS, context=context),
+        POSE: PoseInFrameChannel(POSE, context=context),
+        TF: FrameTransformsChannel(TF, context=context),
+        OBSERVATIONS: SceneUpdateChannel(OBSERVATIONS, context=context),
+        TRAJECTORY: PosesInFrameChannel(TRAJECTORY, context=context),
+    }
+
+
+def nanoseconds(stamp: float) -> int:
+    """Seconds as integer nanoseconds, as exact as the double (``stamp * 1e9`` loses ~100 ns)."""
+    sec = math.floor(stamp)
+    return sec * 1_000_000_000 + round((stamp - sec) * 1e9)
+
+
+def timestamp(ns: int) -> Timestamp:
+    """Foxglove's timestamp of ``ns`` nanoseconds since the epoch."""
+    return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def yaw_quaternion(yaw: float) -> Quaternion:
+    """The rotation by ``yaw`` about z: wallmap's poses are planar."""
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+
+def foxglove_pose(x: float, y: float, yaw: float) -> Pose:
+    """A planar pose as Foxglove's 3-D pose, on the floor (z = 0)."""
+    return Pose(position=Vector3(x=x, y=y, z=0.0), orientation=yaw_quaternion(yaw))
+
+
+def pose_in_frame(pose: messages.Pose) -> PoseInFrame:
+    """The robot pose, drawn as an arrow in the map frame."""
+    return PoseInFrame(
+        timestamp=timestamp(nanoseconds(pose.stamp)),
+        frame_id=pose.frame,
+        pose=foxglove_pose(pose.x, pose.y, pose.yaw),
+    )
+
+
+def frame_transforms(pose: messages.Pose) -> FrameTransforms:
+    """The pose as the transform map -> base_link, so the 3D panel can follow the robot."""
+    return FrameTransforms(
+        transforms=[
+            FrameTransform(
+                timestamp=timestamp(nanoseconds(pose.stamp)),
+                parent_frame_id=pose.frame,
+                child_frame_id=pose.child,
+                translation=Vector3(x=pose.x, y=pose.y, z=0.0),
+                rotation=yaw_quaternion(pose.yaw),
+            )
+        ]
+    )
+
+
+def trajectory(keyframes: Sequence[Sequence[float]], frame: str = "map") -> PosesInFrame:
+    """The mapper's keyframes ``[[stamp, x, y, yaw], ...]`` as one path, stamped by the last."""
+    return PosesInFrame(
+        timestamp=timestamp(nanoseconds(keyframes[-1][0])),
+        frame_id=frame,
+        poses=[foxglove_pose(x, y, yaw) for _, x, y, yaw in keyframes],
+    )
+
+
+def _text(value: object) -> str:
+    """A metadata value as text; booleans as in the JSON map reply."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def _line_list(
+    segments: Iterable[Sequence[Sequence[float]]], color: Color, thickness: float, z: float = 0.0
+) -> LinePrimitive:
+    points = [Point3(x=float(x), y=float(y), z=z) for segment in segments for x, y in segment]
+    return LinePrimitive(
+        type=LinePrimitiveLineType.LineList, points=points, color=color, thickness=thickness
+    )
+
+
+def wall_entity(wall: dict[str, Any], ns: int, frame: str = "map") -> SceneEntity:
+    """One wall of a map reply or update: its segments, its id as a label and as metadata.
+
+    Tentative walls get their own colour: they are served only on request, and may be phantoms.
+    """
+    (x0, y0), (x1, y1) = wall["p0"], wall["p1"]
+    keys = ("id", "u", "v", "n_obs", "n_views", "tentative", "first_seen", "last_seen")
+    return SceneEntity(
+        timestamp=timestamp(ns),
+        frame_id=frame,
+        id=f"wall/{wall['id']}",
+        metadata=[KeyValuePair(key=k, value=_text(wall[k])) for k in keys if k in wall],
+        lines=[
+            _line_list(
+                wall["segments"], TENTATIVE if wall["tentative"] else CONFIRMED, WALL_THICKNESS
+            )
+        ],
+        texts=[
+            TextPrimitive(
+                pose=foxglove_pose((x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0),
+                billboard=True,
+                font_size=14.0,
+                scale_invariant=True,
+                color=LABEL,
+                text=str(wall["id"]),
+            )
+        ],
+    )
+
+
+def walls_scene(walls: Iterable[dict[str, Any]], ns: int, frame: str = "map") -> SceneUpdate:
+    """The whole map as one scene update.
+
+    It deletes every entity first and then draws every wall, so each message stands alone:
+    Foxglove shows the right map after a seek, and a viewer that connects late needs one message.
+    """
+    return SceneUpdate(
+        deletions=[SceneEntityDeletion(timestamp=timestamp(ns), type=SceneEntityDeletionType.All)],
+        entities=[wall_entity(w, ns, frame) for w in sorted(walls, key=lambda w: w["id"])],
+    )
+
+
+def observations_scene(obs: messages.Observations, pose: messages.Pose) -> SceneUpdate:
+    """One frame's observed segments, moved into the map frame with ``pose``.
+
+    One entity, replaced by the next frame's, so the panel shows what the detector sees now.
+    """
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    segments = [
+        [(pose.x + c * px - s * py, pose.y + s * px + c * py) for px, py in (w.p0, w.p1)]
+        for w in obs.walls
+    ]
+    ns = nanoseconds(obs.stamp)
+    return SceneUpdate(
+        entities=[
+            SceneEntity(
+                timestamp=timestamp(ns),
+                frame_id=pose.frame,
+                id="observations",
+                metadata=[
+                    KeyValuePair(key="run", value=obs.run),
+                    KeyValuePair(key="seq", value=str(obs.seq)),
+                    KeyValuePair(key="walls", value=str(len(obs.walls))),
+                    KeyValuePair(key="pose_stamp", value=repr(pose.stamp)),
+                ],
+                lines=[_line_list(segments, OBSERVED, OBSERVATION_THICKNESS, OBSERVATION_HEIGHT)]
+                if segments
+                else [],
+            )
+        ]
+    )
+
+
+class Bridge:
+    """Wallmap messages in, Foxglove messages out, keeping what the conversion needs to know.
+
+    It holds the map (the latest record of each wall, as a map update says to rebuild it) so
+    every wall-map message is the whole map, and recent poses so an observation is drawn where
+    the robot was at its stamp. Not thread-safe: one thread feeds it.
+    """
+
+    def __init__(self) -> None:
+        self.walls: dict[int, dict[str, Any]] = {}
+        self.frame = "map"
+        self.latest: dict[str, Out] = {}  # the last message of each LATCHED topic
+        self._poses = PoseBuffer()
+        self._last_pose: messages.Pose | None = None
+
+    def _emit(self, topic: str, message: Any, ns: int) -> Out:
+        out = Out(topic, message, ns)
+        if topic in LATCHED:
+            self.latest[topic] = out
+        return out
+
+    def map_reply(self, reply: dict[str, Any]) -> list[Out]:
+        """The map as first fetched (with ``trajectory=true``): the walls and the path so far."""
+        self.frame = reply.get("frame", "map")
+        self.walls = {w["id"]: w for w in reply["walls"]}
+        out = []
+        keyframes = reply.get("trajectory") or []
+        if keyframes:
+            path = trajectory(keyframes, self.frame)
+            out.append(self._emit(TRAJECTORY, path, nanoseconds(keyframes[-1][0])))
+        stamp = reply.get("stamp")
+        if stamp is not None and self.walls:
+            out.append(self._walls(stamp))
+        return out
+
+    def map_update(self, update: dict[str, Any]) -> list[Out]:
+        """A map update: keep the latest record per id, drop the merged ids, send the whole map."""
+        for wall in update["walls"]:
+            self.walls[wall["id"]] = wall
+        for gone in update["removed"]:
+            self.walls.pop(gone, None)
+        return [self._walls(update["stamp"])]
+
+    def _walls(self, stamp: float) -> Out:
+        ns = nanoseconds(stamp)
+        return self._emit(WALLS, walls_scene(self.walls.values(), ns, self.frame), ns)
+
+    def pose(self, pose: messages.Pose) -> list[Out]:
+        """A robot pose: as a pose (an arrow) and as the transform map -> base_link."""
+        self._poses.add(pose)
+        self._last_pose = pose
+        ns = nanoseconds(pose.stamp)
+        return [
+            self._emit(POSE, pose_in_frame(pose), ns),
+            self._emit(TF, frame_transforms(pose), ns),
+        ]
+
+    def observations(self, obs: messages.Observations) -> list[Out]:
+        """A frame's observations, placed with the pose at their stamp.
+
+        When no pose covers the stamp yet (a pose source that lags), the latest pose stands in;
+        before any pose there is nowhere to draw them, and nothing is sent.
+        """
+        pose = self._poses.lookup(obs.stamp)
+        if not isinstance(pose, messages.Pose):
+            pose = self._last_pose
+        if pose is None:
+            return []
+        return [self._emit(OBSERVATIONS, observations_scene(obs, pose), nanoseconds(obs.stamp))]
