@@ -100,6 +100,9 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["query", "--prefix", "a/*"], ["invalid --prefix"]),
         (["mapper", "--pose-key", "rt/tf*"], ["invalid --pose-key", "may only be preceded"]),
         (["mapper", "--pose-format", "ros2:std_msgs/msg/String"], ["--pose-format"]),
+        (["player", "x.bag", "--start", "-1"], ["--start", ">= 0"]),
+        (["odometry", "--initial-pose", "1,nan,0"], ["--initial-pose", "finite"]),
+        (["scene", "/tmp/wallmap-scene-without-suffix"], ["ends in .bag"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):

@@ -223,6 +223,9 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     if args.out.exists():
         msg = f"{args.out} exists; choose a new path"
         raise FileExistsError(msg)
+    if args.format == "ros1" and args.out.suffix != ".bag":
+        msg = f"a ROS 1 bag's name ends in .bag (the player reads it by its suffix): {args.out}"
+        raise ValueError(msg)
     info = write_scene_bag(
         args.out,
         seed=args.seed,
