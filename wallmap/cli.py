@@ -46,6 +46,7 @@ from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
 from wallmap.status import fetch_status, format_status
 from wallmap.status import to_json as status_json
+from wallmap.view import add_command as add_view_command
 
 FAILURES = (TransportError, PlayerError, TfError, StateError, QueryError, OSError, ValueError)
 
@@ -444,6 +445,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_demo)
     add_foxglove_commands(sub)
     add_doctor_command(sub)
+    add_view_command(sub)
     return parser
 
 

@@ -1,0 +1,284 @@
+"""The live map as the page sees it: the mapper's walls, trajectory, newest pose and observations.
+
+Every change bumps a version number and stamps the walls it touched, so a page that has seen
+version N asks for ``since=N`` and gets only the walls that changed and the ids that went; with
+thousands of walls and a map that changes every half second, that keeps each poll small. The
+state is fed by the Zenoh threads of :mod:`wallmap.view.server` and read by the HTTP threads,
+behind one lock.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import threading
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from wallmap.common.codec import MessageError
+from wallmap.common.messages import Observations, Pose
+
+POSES_KEPT = 256  # recent poses, to place each observation with the pose nearest its stamp
+
+
+def _finite_array(value: Any, shape: tuple[int, ...], name: str) -> list[Any]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        msg = f"wall field {name!r} is not numeric"
+        raise MessageError(msg) from err
+    if arr.shape != shape or not np.isfinite(arr).all():
+        msg = f"wall field {name!r} must be finite numbers of shape {shape}"
+        raise MessageError(msg)
+    return arr.tolist()
+
+
+def _int(record: dict[str, Any], name: str, default: int | None = None) -> int:
+    value = record.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, int):
+        msg = f"wall field {name!r} must be an integer"
+        raise MessageError(msg)
+    return value
+
+
+def wall_record(record: Any) -> dict[str, Any]:
+    """Check a wall record of the map reply or an update; keep the fields the page uses.
+
+    Anything the page could not draw (a missing field, a non-finite number, which JSON cannot
+    carry) raises MessageError, so one bad record never reaches the browser.
+    """
+    if not isinstance(record, dict):
+        msg = f"wall record is a {type(record).__name__}, not a map"
+        raise MessageError(msg)
+    try:
+        p0 = _finite_array(record["p0"], (2,), "p0")
+        p1 = _finite_array(record["p1"], (2,), "p1")
+        u, v = _finite_array([record["u"], record["v"]], (2,), "u, v")
+        cov = _finite_array(record["cov"], (2, 2), "cov")
+    except KeyError as err:
+        msg = f"wall record lacks {err}"
+        raise MessageError(msg) from None
+    segments = record.get("segments") or [[p0, p1]]
+    if not isinstance(segments, list):
+        msg = "wall field 'segments' must be a list"
+        raise MessageError(msg)
+    tentative = record.get("tentative", False)
+    if not isinstance(tentative, bool):
+        msg = "wall field 'tentative' must be true or false"
+        raise MessageError(msg)
+    return {
+        "id": _int(record, "id"),
+        "u": u,
+        "v": v,
+        "cov": cov,
+        "p0": p0,
+        "p1": p1,
+        "segments": _finite_array(segments, (len(segments), 2, 2), "segments"),
+        "n_obs": _int(record, "n_obs"),
+        "n_views": _int(record, "n_views", 0),
+        "tentative": tentative,
+    }
+
+
+def _list(message: dict[str, Any], name: str) -> list[Any]:
+    value = message.get(name, [])
+    if not isinstance(value, list):
+        msg = f"field {name!r} must be a list"
+        raise MessageError(msg)
+    return value
+
+
+def _counts(message: dict[str, Any]) -> dict[str, Any]:
+    """The map's counters in a reply or update, checked: JSON has no NaN."""
+    counts = {k: message[k] for k in ("frames", "observations", "stamp") if k in message}
+    for name, value in counts.items():
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (value is None and name == "stamp") and not (number and math.isfinite(value)):
+            msg = f"field {name!r} must be a finite number"
+            raise MessageError(msg)
+    return counts
+
+
+def _trajectory(rows: Any) -> list[list[float]]:
+    if not rows:
+        return []
+    return _finite_array(rows, (len(rows), 4), "trajectory")
+
+
+def _pose_json(pose: Pose) -> dict[str, float]:
+    return {"stamp": pose.stamp, "x": pose.x, "y": pose.y, "yaw": pose.yaw}
+
+
+class LiveMap:
+    """The map, versioned per wall, plus the newest pose and observations. Thread-safe."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.version = 0
+        self._walls: dict[int, dict[str, Any]] = {}
+        self._changed: dict[int, int] = {}  # wall id -> version of its last change
+        self._removed: dict[int, int] = {}  # wall id -> version it went at
+        self._trajectory: list[list[float]] = []
+        self._trajectory_version = 0
+        self._counts: dict[str, Any] = {"frames": 0, "observations": 0, "stamp": None}
+        self._reply_frames = -1  # frames behind the last full reply: older updates are stale
+        self._poses: deque[Pose] = deque(maxlen=POSES_KEPT)
+        self._observations: Observations | None = None
+        self._status: str | None = "waiting for the mapper"
+
+    # --- feeding -----------------------------------------------------------------------------
+
+    def replace(self, reply: dict[str, Any]) -> None:
+        """Take a whole map reply (with ``tentative=true``): walls not in it are gone.
+
+        Raises:
+            MessageError: a malformed reply; the map is left as it was.
+        """
+        walls = {w["id"]: w for w in map(wall_record, _list(reply, "walls"))}
+        trajectory = _trajectory(reply.get("trajectory"))
+        counts = _counts(reply)
+        with self._lock:
+            version = self.version + 1
+            changed = self._store(walls.values(), version)
+            for wall_id in set(self._walls) - set(walls):
+                self._drop(wall_id, version)
+                changed = True
+            if trajectory != self._trajectory:
+                self._trajectory = trajectory
+                self._trajectory_version = version
+                changed = True
+            changed |= self._count(counts)
+            self._reply_frames = self._counts["frames"]
+            if changed:
+                self.version = version
+
+    def apply_update(self, update: dict[str, Any]) -> bool:
+        """Fold in a ``map/updates`` message; False when it predates the last full reply.
+
+        An update queued while a full query ran can be older than that reply; applying it would
+        put back walls as they were, so it is skipped (its changes are in the reply already).
+
+        Raises:
+            MessageError: a malformed update; the map is left as it was.
+        """
+        walls = [wall_record(w) for w in _list(update, "walls")]
+        removed = _list(update, "removed")
+        counts = _counts(update)
+        if not all(isinstance(i, int) for i in removed):
+            msg = "update field 'removed' must be a list of wall ids"
+            raise MessageError(msg)
+        with self._lock:
+            if counts.get("frames", self._reply_frames) < self._reply_frames:
+                return False
+            version = self.version + 1
+            changed = self._store(walls, version)
+            for wall_id in removed:
+                if wall_id in self._walls:
+                    self._drop(wall_id, version)
+                    changed = True
+            changed |= self._count(counts)
+            if changed:
+                self.version = version
+            return True
+
+    def add_pose(self, pose: Pose) -> None:
+        """Keep a pose; poses arrive in stamp order but a late one is put in its place."""
+        with self._lock:
+            if self._poses and pose.stamp < self._poses[-1].stamp:
+                stamps = [p.stamp for p in self._poses]
+                self._poses.insert(bisect.bisect(stamps, pose.stamp), pose)
+            else:
+                self._poses.append(pose)
+
+    def set_observations(self, observations: Observations) -> None:
+        """Keep the detector's newest frame (placed in the map when it is read)."""
+        with self._lock:
+            self._observations = observations
+
+    def set_status(self, status: str | None) -> None:
+        """What keeps the map from being current (no mapper, ...), or None when all is well."""
+        with self._lock:
+            self._status = status
+
+    def _store(self, walls: Any, version: int) -> bool:
+        changed = False
+        for wall in walls:
+            if self._walls.get(wall["id"]) != wall:
+                self._walls[wall["id"]] = wall
+                self._changed[wall["id"]] = version
+                self._removed.pop(wall["id"], None)  # a restarted mapper reuses ids
+                changed = True
+        return changed
+
+    def _drop(self, wall_id: int, version: int) -> None:
+        del self._walls[wall_id]
+        del self._changed[wall_id]
+        self._removed[wall_id] = version
+
+    def _count(self, counts: dict[str, Any]) -> bool:
+        changed = any(self._counts.get(k) != v for k, v in counts.items())
+        self._counts.update(counts)
+        return changed
+
+    # --- reading -----------------------------------------------------------------------------
+
+    def delta(self, since: int) -> dict[str, Any]:
+        """What changed after version ``since``: the body of ``GET /api/map?since=N``.
+
+        ``full`` is true for ``since=0`` and for a version this server never gave out (a page
+        left open across a restart of the view): then ``walls`` is the whole map.
+        """
+        with self._lock:
+            full = since <= 0 or since > self.version
+            if full:
+                walls = list(self._walls.values())
+                removed: list[int] = []
+            else:
+                walls = [self._walls[i] for i, v in self._changed.items() if v > since]
+                removed = [i for i, v in self._removed.items() if v > since]
+            body: dict[str, Any] = {
+                "version": self.version,
+                "full": full,
+                **self._counts,
+                "walls": walls,
+                "removed": removed,
+            }
+            if full or self._trajectory_version > since:
+                body["trajectory"] = self._trajectory
+            return body
+
+    def latest(self) -> dict[str, Any]:
+        """The newest pose and the detector's newest walls placed in the map: ``/api/latest``.
+
+        ``recent`` is the path of the kept poses after the trajectory's last keyframe, so the
+        page draws the trajectory up to the robot between two queries of the map.
+
+        The observations are placed with the kept pose nearest their stamp, which is the newest
+        pose unless the poses run ahead of the detector (a fast playback).
+        """
+        with self._lock:
+            pose = self._poses[-1] if self._poses else None
+            obs = self._observations
+            near = min(self._poses, key=lambda p: abs(p.stamp - obs.stamp)) if obs else None
+            status = self._status
+            last = self._trajectory[-1][0] if self._trajectory else -math.inf
+            recent = [[p.x, p.y] for p in self._poses if p.stamp > last]
+        placed = None
+        if obs is not None:
+            placed = {"stamp": obs.stamp, "seq": obs.seq, "pose": None, "walls": []}
+            if near is not None:
+                c, s = math.cos(near.yaw), math.sin(near.yaw)
+                rot, t = np.array([[c, -s], [s, c]]), np.array([near.x, near.y])
+                placed["pose"] = _pose_json(near)
+                placed["walls"] = [
+                    {"p0": (rot @ w.p0 + t).tolist(), "p1": (rot @ w.p1 + t).tolist()}
+                    for w in obs.walls
+                ]
+        return {
+            "pose": _pose_json(pose) if pose else None,
+            "recent": recent,
+            "observations": placed,
+            "status": status,
+        }
