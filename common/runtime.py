@@ -14,7 +14,8 @@ from typing import TypeVar
 
 import zenoh
 
-from wallmap.common.codec import encode
+from wallmap.common.codec import MessageError, encode
+from wallmap.common.messages import Frame, unpack_frame
 from wallmap.common.transport import Keys
 
 log = logging.getLogger("wallmap")
@@ -66,6 +67,18 @@ class Stats:
         """A copy of all counters."""
         with self._lock:
             return dict(self._counts)
+
+
+def received_frames(channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats) -> Iterator[Frame]:
+    """The sensor frames a subscriber receives, counted; malformed ones refused and counted."""
+    for sample in drain(channel):
+        stats.add("received")
+        try:
+            frame = unpack_frame(sample.payload.to_bytes())
+        except MessageError as err:
+            stats.refuse("frame", str(err))
+            continue
+        yield frame
 
 
 class Presence:

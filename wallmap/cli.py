@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from wallmap import __version__
+from wallmap.arg_types import non_negative, positive
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scan_row import RowSelection
@@ -56,22 +57,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def _positive(value: str) -> float:
-    x = float(value)
-    if not math.isfinite(x) or x <= 0:
-        msg = f"must be a positive number, got {value}"
-        raise argparse.ArgumentTypeError(msg)
-    return x
-
-
-def _non_negative(value: str) -> float:
-    number = float(value)
-    if not math.isfinite(number) or number < 0:
-        msg = f"must be a number >= 0, got {value}"
-        raise argparse.ArgumentTypeError(msg)
-    return number
 
 
 def _pose(value: str) -> tuple[float, float, float]:
@@ -262,7 +247,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _add_bag_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", type=Path, metavar="BAG", help="ROS 1 .bag file or ROS 2 bag folder")
     speed = p.add_mutually_exclusive_group()
-    speed.add_argument("--rate", type=_positive, default=1.0, help="speed factor (default 1)")
+    speed.add_argument("--rate", type=positive, default=1.0, help="speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="as fast as the pipeline takes it")
     p.add_argument(
         "--pose-source",
@@ -291,15 +276,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("player", help="play a bag: sensor frames and poses")
     _add_bag_arguments(p)
     p.add_argument(
-        "--wait-timeout", type=_positive, default=30.0, help="wait for router and services (s)"
+        "--wait-timeout", type=positive, default=30.0, help="wait for router and services (s)"
     )
     p.add_argument(
         "--whole-clouds",
         action="store_true",
         help="send whole clouds, not only the row the detector asks for (e.g. to record them)",
     )
-    p.add_argument("--start", type=_non_negative, default=0.0, help="begin S seconds into the bag")
-    p.add_argument("--duration", type=_positive, help="play S seconds of the bag")
+    p.add_argument("--start", type=non_negative, default=0.0, help="begin S seconds into the bag")
+    p.add_argument("--duration", type=positive, help="play S seconds of the bag")
     p.add_argument("--loop", action="store_true", help="start over at the end, until stopped")
     p.add_argument("--topics", metavar="T1,T2", help="read only these topics (sensor, tf, poses)")
     p.add_argument(
@@ -352,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PARENT>CHILD",
         help="the pose wanted from ros2:tf2_msgs/msg/TFMessage (default map>base_link)",
     )
-    p.add_argument("--pose-wait", type=_positive, default=5.0, help="max wait for a pose (s)")
+    p.add_argument("--pose-wait", type=positive, default=5.0, help="max wait for a pose (s)")
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_mapper)
 
@@ -378,13 +363,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
     p.add_argument("--bbox", metavar="XMIN,YMIN,XMAX,YMAX", help="walls crossing this box (m)")
     p.add_argument("--since", type=float, metavar="STAMP", help="walls seen since this stamp")
-    p.add_argument("--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper")
+    p.add_argument("--timeout", type=positive, default=5.0, help="seconds to wait for the mapper")
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_query)
 
     p = sub.add_parser("status", help="the live services and their counters")
     p.add_argument("--json", action="store_true", help="JSON instead of a table")
-    p.add_argument("--timeout", type=_positive, default=2.0, help="seconds to wait for answers")
+    p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for answers")
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_status)
 
@@ -419,7 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--min-obs", type=int, default=1, metavar="N", help="walls seen N times")
         p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
         p.add_argument(
-            "--timeout", type=_positive, default=5.0, help="seconds to wait for the mapper"
+            "--timeout", type=positive, default=5.0, help="seconds to wait for the mapper"
         )
         add_zenoh_arguments(p)
         p.set_defaults(func=_cmd_plot if name == "plot" else _cmd_export)
@@ -434,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--width", type=int, default=160, help="image width (px)")
     p.add_argument("--height", type=int, default=120, help="image height (px)")
-    p.add_argument("--rate", type=_positive, default=15.0, help="frames per second")
+    p.add_argument("--rate", type=positive, default=15.0, help="frames per second")
     p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
     p.set_defaults(func=_cmd_scene)
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import queue
 import sys
 import threading
@@ -24,6 +23,7 @@ from typing import Any
 import zenoh
 
 from wallmap import __version__
+from wallmap.arg_types import port, positive
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
@@ -43,30 +43,14 @@ POLL = 0.1  # s between checks of the stop conditions while nothing arrives
 REFUSALS = (MessageError, KeyError, TypeError, ValueError, OverflowError)
 
 
-def _seconds(value: str) -> float:
-    x = float(value)
-    if not math.isfinite(x) or x <= 0:
-        msg = f"must be a positive number of seconds, got {value}"
-        raise argparse.ArgumentTypeError(msg)
-    return x
-
-
-def _port(value: str) -> int:
-    port = int(value)
-    if not 0 <= port <= 65535:
-        msg = f"must be a TCP port (0 for any free one), got {value}"
-        raise argparse.ArgumentTypeError(msg)
-    return port
-
-
 def add_commands(sub: Any) -> None:
     """Add ``record`` and ``foxglove`` to the ``wallmap`` subcommands (``add_subparsers()``)."""
     p = sub.add_parser("record", help="record a running system to an MCAP file for Foxglove")
     p.add_argument("out", type=Path, metavar="OUT", help="MCAP file to write (must not exist)")
-    p.add_argument("--duration", type=_seconds, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=positive, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--until-idle",
-        type=_seconds,
+        type=positive,
         metavar="S",
         help="stop once no message came for S seconds, counted from the first one (e.g. after "
         "a --fast playback; the map fetched at start does not count)",
@@ -77,7 +61,7 @@ def add_commands(sub: Any) -> None:
     p = sub.add_parser("foxglove", help="serve a running system live to Foxglove (WebSocket)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument(
-        "--port", type=_port, default=8765, help="WebSocket port (default 8765; 0: any free one)"
+        "--port", type=port, default=8765, help="WebSocket port (default 8765; 0: any free one)"
     )
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_foxglove)

@@ -12,10 +12,10 @@ import threading
 import zenoh
 
 from wallmap.common.allocator import keep_large_buffers
-from wallmap.common.codec import MessageError, encode
-from wallmap.common.messages import pack, unpack_frame
+from wallmap.common.codec import encode
+from wallmap.common.messages import pack
 from wallmap.common.ransac import RowReport
-from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.runtime import Presence, Stats, drain, received_frames, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
@@ -80,13 +80,7 @@ def _work(
     Each frame's diagnostics (points, clusters, lines, what was turned down and why) go out on
     their own key; Zenoh sends nothing when nobody listens.
     """
-    for sample in drain(channel):
-        stats.add("received")
-        try:
-            frame = unpack_frame(sample.payload.to_bytes())
-        except MessageError as err:
-            stats.refuse("frame", str(err))
-            continue
+    for frame in received_frames(channel, stats):
         report = RowReport()
         observations = detector.detect(frame, report)
         publisher.put(pack(observations))

@@ -15,8 +15,8 @@ import numpy as np
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.messages import pack, unpack_frame
-from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.messages import pack
+from wallmap.common.runtime import Presence, Stats, received_frames, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import QueryError, fetch_map
@@ -110,13 +110,7 @@ def _work(
     stats: Stats,
 ) -> None:
     """A pose for every frame, in arrival order, until the subscriber is undeclared."""
-    for sample in drain(frames):
-        stats.add("received")
-        try:
-            frame = unpack_frame(sample.payload.to_bytes())
-        except MessageError as err:
-            stats.refuse("frame", str(err))
-            continue
+    for frame in received_frames(frames, stats):
         if frame.sensor == "depth":
             stats.note(
                 "depth_frames",

@@ -26,6 +26,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import zenoh
 
+from wallmap.arg_types import port
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
@@ -227,19 +228,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _port(value: str) -> int:
-    port = int(value)
-    if not 0 <= port <= 65535:
-        msg = f"must be 0-65535, got {value}"
-        raise argparse.ArgumentTypeError(msg)
-    return port
-
-
 def add_command(sub: Any) -> None:
     """Add ``view`` to the ``wallmap`` command's subparsers (``sub`` from add_subparsers)."""
     p = sub.add_parser("view", help="a live map page on localhost (pan, zoom, hover a wall)")
     p.add_argument(
-        "--port", type=_port, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT})"
+        "--port", type=port, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT})"
     )
     p.add_argument(
         "--host",
