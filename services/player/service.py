@@ -22,12 +22,13 @@ import zenoh
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode, encode
-from wallmap.common.messages import Frame, pack, unpack_progress
+from wallmap.common.messages import Frame, Pose, pack, unpack_progress
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.player.bag_source import LASERSCAN, BagSource
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
@@ -210,6 +211,72 @@ def _control(
             query.reply(query.key_expr, encode({**state, **playback.status()}))
 
 
+class _Outlet:
+    """Where the frames go: the publishers, what was sent, and the progress messages."""
+
+    def __init__(
+        self, session: zenoh.Session, keys: Keys, run_id: str, sensor: str, playback: Playback,
+        bag: BagSource,
+    ) -> None:  # fmt: skip
+        block = zenoh.CongestionControl.BLOCK
+        self._frames = session.declare_publisher(keys.frames, congestion_control=block)
+        self._poses = session.declare_publisher(keys.pose, congestion_control=block)
+        self._progress = session.declare_publisher(keys.player_progress)
+        self._run, self._sensor, self._playback = run_id, sensor, playback
+        self.published = self.poses = 0
+        self.bar = _ProgressLine(bag.frame_count)
+        self.state: dict[str, Any] = {
+            "run": run_id, "published": 0, "frames": bag.frame_count,
+            "duration": bag.duration, "bag": str(bag.path),
+        }  # fmt: skip
+        self._last_progress = 0.0
+
+    def send(self, frame: SensorFrame, pose: Pose | None) -> None:
+        """Publish one frame (and its pose), and say so at most every PROGRESS_PERIOD."""
+        if pose is not None:
+            self._poses.put(pack(pose))
+            self.poses += 1
+        message = Frame(
+            self._run, self.published, frame.stamp, frame.frame_id, frame.points,
+            frame.T_base_sensor, self._sensor,
+        )  # fmt: skip
+        self._frames.put(pack(message))
+        self.published += 1
+        self.state["published"] = self.published
+        self.bar.update(self.published)
+        if time.monotonic() - self._last_progress >= PROGRESS_PERIOD:
+            self._last_progress = time.monotonic()
+            self._progress.put(encode({**self.state, **self._playback.status()}))
+
+    def finish(self) -> None:
+        """The last progress message: done."""
+        self._progress.put(encode({**self.state, **self._playback.status(), "state": "done"}))
+
+
+def _play_pass(
+    bag: BagSource,
+    rows: RowSelection | None,
+    start: float,
+    player: PlayerSettings,
+    playback: Playback,
+    outlet: _Outlet,
+    acks: _Acks,
+    stop: threading.Event,
+) -> float | None:
+    """Publish the bag's frames from ``start`` (s) on; returns where to seek to, if asked."""
+    end = None if player.duration is None else player.start + player.duration
+    for frame, pose in bag.frames(rows, start=start, stop=end):
+        turn = playback.wait_turn(frame.bag_time, stop)
+        if stop.is_set():
+            return None
+        if turn.seek is not None:
+            return turn.seek
+        if player.fast:
+            acks.wait_until(outlet.published - player.window + 1, player.stall_timeout, stop)
+        outlet.send(frame, pose)
+    return None
+
+
 def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) -> PlayResult:
     """Play the bag once (or in a loop); raises PlayerError (or TransportError) with a reason."""
     log = setup_logging("player")
@@ -233,10 +300,6 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             player.pose_source,
         )
         with open_session(settings) as session:
-            block = zenoh.CongestionControl.BLOCK
-            frames_pub = session.declare_publisher(keys.frames, congestion_control=block)
-            pose_pub = session.declare_publisher(keys.pose, congestion_control=block)
-            progress_pub = session.declare_publisher(keys.player_progress)
             progress_sub = session.declare_subscriber(
                 keys.progress, zenoh.handlers.FifoChannel(256)
             )
@@ -248,62 +311,30 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )
             playback = Playback(player.rate, fast=player.fast, paused=player.paused)
-            state: dict[str, Any] = {
-                "run": run_id, "published": 0, "frames": bag.frame_count,
-                "duration": bag.duration, "bag": str(player.bag),
-            }  # fmt: skip
+            outlet = _Outlet(session, keys, run_id, sensor, playback, bag)
             control = session.declare_queryable(keys.player_control, zenoh.handlers.FifoChannel(16))
             threading.Thread(
-                target=_control, args=(control.handler, playback, state), daemon=True
+                target=_control, args=(control.handler, playback, outlet.state), daemon=True
             ).start()
-            bar = _ProgressLine(bag.frame_count)
-            published = poses = 0
             start_wall = time.monotonic()
-            last_progress = 0.0
-            stop_at = None if player.duration is None else player.start + player.duration
             position = player.start
             with terminal_keys(playback, stop) as interactive:
                 if interactive:
                     print(HELP, file=sys.stderr)
                 while not stop.is_set():
-                    seek = None
-                    for frame, pose in bag.frames(rows, start=position, stop=stop_at):
-                        turn = playback.wait_turn(frame.bag_time, stop)
-                        if stop.is_set():
-                            break
-                        if turn.seek is not None:
-                            seek = turn.seek
-                            break
-                        if player.fast:
-                            acks.wait_until(
-                                published - player.window + 1, player.stall_timeout, stop
-                            )
-                        if pose is not None:
-                            pose_pub.put(pack(pose))
-                            poses += 1
-                        message = Frame(
-                            run_id, published, frame.stamp, frame.frame_id, frame.points,
-                            frame.T_base_sensor, sensor,
-                        )  # fmt: skip
-                        frames_pub.put(pack(message))
-                        published += 1
-                        state["published"] = published
-                        bar.update(published)
-                        if time.monotonic() - last_progress >= PROGRESS_PERIOD:
-                            last_progress = time.monotonic()
-                            progress_pub.put(encode({**state, **playback.status()}))
+                    seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
                     if seek is not None:
                         position = seek
                     elif player.loop and not stop.is_set():
                         position = player.start
                     else:
                         break
-            bar.update(published, force=True)
+            outlet.bar.update(outlet.published, force=True)
             if player.fast or "mapper" in player.wait_for:
-                acks.wait_until(published, player.stall_timeout, stop)
+                acks.wait_until(outlet.published, player.stall_timeout, stop)
             seconds = time.monotonic() - start_wall
-            progress_pub.put(encode({**state, **playback.status(), "state": "done"}))
+            outlet.finish()
             control.undeclare()
             progress_sub.undeclare()
     waited = player.fast or "mapper" in player.wait_for
-    return PlayResult(published, poses, seconds, acks.integrated if waited else None)
+    return PlayResult(outlet.published, outlet.poses, seconds, acks.integrated if waited else None)
