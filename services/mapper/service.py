@@ -71,12 +71,16 @@ class MapperCore:
         self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict()
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
 
-    def count(self, run: str, *, integrated: bool) -> Progress:
-        """Record one processed frame of a run; returns the run's new progress."""
+    def count(self, run: str, seq: int, *, integrated: bool) -> Progress:
+        """Record frame ``seq`` of a run as processed; returns the run's new progress.
+
+        ``processed`` is the next frame number the run may send: frames arrive in order (see
+        ``_observations``), so everything before it has been processed.
+        """
         old = self.runs.pop(run, Progress(run, 0, 0, 0))
         new = Progress(
             run,
-            old.processed + 1,
+            seq + 1,
             old.integrated + int(integrated),
             old.dropped + int(not integrated),
         )
@@ -185,6 +189,30 @@ def _poses(
         core.stats.add("poses", len(poses))
 
 
+class _InOrder:
+    """Each run's frames once and in order.
+
+    A frame the player sends again after its acknowledgements stalled (a detector or router
+    restarted and frames were lost on the way) may already have been taken, or may follow a
+    gap: the first is a duplicate, the second waits for the frames before it, which the player
+    sends again too. A run first seen mid-way (the mapper started late) starts where it is.
+    """
+
+    def __init__(self) -> None:
+        self._next: collections.OrderedDict[str, int] = collections.OrderedDict()
+
+    def take(self, run: str, seq: int) -> str | None:
+        """None to take frame ``seq`` of ``run`` now, else why not."""
+        expected = self._next.get(run, seq)
+        if seq != expected:
+            return "resent" if seq < expected else "out_of_order"
+        self._next[run] = seq + 1
+        self._next.move_to_end(run)
+        while len(self._next) > MAX_RUNS:
+            self._next.popitem(last=False)
+        return None
+
+
 def _observations(
     channel: zenoh.handlers.Handler[zenoh.Sample],
     core: MapperCore,
@@ -195,6 +223,7 @@ def _observations(
     pending: collections.deque[tuple[float, Observations]] = collections.deque()
     acks: dict[str, Progress] = {}  # the latest progress of each run, not yet published
     unacked = 0  # frames processed since the last acknowledgement
+    order = _InOrder()
     while True:
         try:
             if not pending:
@@ -207,9 +236,14 @@ def _observations(
             return
         if sample is not None:
             try:
-                pending.append((time.monotonic(), unpack_observations(sample.payload.to_bytes())))
+                observations = unpack_observations(sample.payload.to_bytes())
             except MessageError as err:
                 core.stats.refuse("observations", str(err))
+            else:
+                if (skipped := order.take(observations.run, observations.seq)) is None:
+                    pending.append((time.monotonic(), observations))
+                else:
+                    core.stats.add(skipped)
         while pending and _process_head(pending, core, pose_wait, acks):
             unacked += 1
         if unacked >= ACK_EVERY:
@@ -251,7 +285,7 @@ def _process_head(
         if integrated:
             core.map.integrate(obs, pose)
             core.dirty = True
-        acks[obs.run] = core.count(obs.run, integrated=integrated)
+        acks[obs.run] = core.count(obs.run, obs.seq, integrated=integrated)
     if integrated:
         core.stats.add("integrated")
     else:

@@ -10,6 +10,7 @@ for the services it feeds (their liveliness tokens), so no frame goes out to nob
 
 from __future__ import annotations
 
+import collections
 import sys
 import threading
 import time
@@ -34,6 +35,9 @@ from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
 POLL = 0.001  # s between checks of the acknowledgement channel
 PROGRESS_PERIOD = 0.2  # s between progress messages
+RESEND_AFTER = 2.0  # s without an acknowledgement before frames are sent again (--fast)
+RESEND_MEMORY = 1024  # frames whose bag times are kept for sending again
+SEEK_SLACK = 1e-6  # s before a frame's bag time, so rounding cannot skip it
 
 
 @dataclass(frozen=True)
@@ -132,7 +136,7 @@ class _Acks:
         self.run = run
         self.processed = 0
         self.integrated = 0
-        self.last_change = time.monotonic()
+        self.last_change = self.last_resend = time.monotonic()
 
     def poll(self) -> None:
         while (sample := self.channel.try_recv()) is not None:
@@ -144,17 +148,43 @@ class _Acks:
                 self.processed, self.integrated = progress.processed, progress.integrated
                 self.last_change = time.monotonic()
 
-    def wait_until(self, processed: int, stall_timeout: float, stop: threading.Event) -> None:
+    def wait_until(
+        self,
+        processed: int,
+        stall_timeout: float,
+        stop: threading.Event,
+        resend_after: float | None = None,
+    ) -> None:
+        """Wait for ``processed`` frames to be acknowledged.
+
+        Raises:
+            Resend: no acknowledgement for ``resend_after`` s: frames were lost on the way.
+            PlayerError: none for ``stall_timeout`` s.
+        """
         self.poll()
         while self.processed < processed and not stop.is_set():
-            if time.monotonic() - self.last_change > stall_timeout:
+            now = time.monotonic()
+            if now - self.last_change > stall_timeout:
                 msg = (
                     f"the mapper acknowledged no frame for {stall_timeout:.0f} s "
                     f"({self.processed} of {processed} done); is it running?"
                 )
                 raise PlayerError(msg)
+            if resend_after is not None and now - max(self.last_change, self.last_resend) > (
+                resend_after
+            ):
+                self.last_resend = now
+                raise Resend(self.processed)
             time.sleep(POLL)
             self.poll()
+
+
+class Resend(Exception):  # noqa: N818 (a signal to go back, not an error)
+    """Frames from ``seq`` on must be sent again."""
+
+    def __init__(self, seq: int) -> None:
+        super().__init__(seq)
+        self.seq = seq
 
 
 class _ProgressLine:
@@ -230,6 +260,16 @@ class _Outlet:
             "duration": bag.duration, "bag": str(bag.path),
         }  # fmt: skip
         self._last_progress = 0.0
+        self._sent: collections.deque[tuple[int, float]] = collections.deque(maxlen=RESEND_MEMORY)
+
+    def rewind(self, seq: int) -> float:
+        """Send again from frame ``seq`` (numbers reused); returns its bag time to seek to."""
+        times = dict(self._sent)
+        if seq not in times:
+            msg = f"frame {seq} to send again is no longer known (sent up to {self.published})"
+            raise PlayerError(msg)
+        self.published = seq
+        return times[seq]
 
     def send(self, frame: SensorFrame, pose: Pose | None) -> None:
         """Publish one frame (and its pose), and say so at most every PROGRESS_PERIOD."""
@@ -241,6 +281,7 @@ class _Outlet:
             frame.T_base_sensor, self._sensor,
         )  # fmt: skip
         self._frames.put(pack(message))
+        self._sent.append((self.published, frame.bag_time))
         self.published += 1
         self.state["published"] = self.published
         self.bar.update(self.published)
@@ -272,7 +313,9 @@ def _play_pass(
         if turn.seek is not None:
             return turn.seek
         if player.fast:
-            acks.wait_until(outlet.published - player.window + 1, player.stall_timeout, stop)
+            acks.wait_until(
+                outlet.published - player.window + 1, player.stall_timeout, stop, RESEND_AFTER
+            )
         outlet.send(frame, pose)
     return None
 
@@ -322,7 +365,20 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 if interactive:
                     print(HELP, file=sys.stderr)
                 while not stop.is_set():
-                    seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
+                    try:
+                        seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
+                        if seek is None and not player.loop and player.fast:
+                            acks.wait_until(
+                                outlet.published, player.stall_timeout, stop, RESEND_AFTER
+                            )
+                    except Resend as resend:
+                        log.warning(
+                            "no acknowledgement for %.0f s: sending again from frame %d",
+                            RESEND_AFTER,
+                            resend.seq,
+                        )
+                        position = max(outlet.rewind(resend.seq) - SEEK_SLACK, 0.0)
+                        continue
                     if seek is not None:
                         position = seek
                     elif player.loop and not stop.is_set():
@@ -330,7 +386,7 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                     else:
                         break
             outlet.bar.update(outlet.published, force=True)
-            if player.fast or "mapper" in player.wait_for:
+            if "mapper" in player.wait_for and not player.fast:
                 acks.wait_until(outlet.published, player.stall_timeout, stop)
             seconds = time.monotonic() - start_wall
             outlet.finish()
