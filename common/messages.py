@@ -145,6 +145,15 @@ class Pose:
         )
 
 
+def _flag(m: dict[str, Any], name: str) -> bool:
+    """An optional boolean field, false when absent (older senders)."""
+    value = m.get(name, False)
+    if not isinstance(value, bool):
+        msg = f"field {name!r} must be true or false, got {value!r}"
+        raise MessageError(msg)
+    return value
+
+
 @dataclass(frozen=True)
 class Frame:
     """One sensor frame: an organized cloud (h, w, 3) in the sensor frame and the sensor's mount.
@@ -152,7 +161,8 @@ class Frame:
     ``run`` names the player run and ``seq`` numbers its frames from 0, so the mapper can
     acknowledge them and a player in ``--fast`` mode can wait. ``sensor`` says whose noise the
     points carry: a depth camera's (``depth``, even when the player sent only the chosen row) or
-    a 2-D scanner's (``scan``).
+    a 2-D scanner's (``scan``). ``resends`` says the player sends lost frames again (``--fast``),
+    so the mapper waits for a missing frame rather than skip it.
     """
 
     run: str
@@ -162,6 +172,7 @@ class Frame:
     points: NDArray[np.float32]
     base_from_sensor: Array
     sensor: str = "depth"
+    resends: bool = False
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding (the points go as raw bytes)."""
@@ -173,6 +184,7 @@ class Frame:
             "points": self.points,
             "base_from_sensor": self.base_from_sensor,
             "sensor": self.sensor,
+            "resends": self.resends,
         }
 
     @classmethod
@@ -194,6 +206,7 @@ class Frame:
             points=points,
             base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
             sensor=_sensor(m),
+            resends=_flag(m, "resends"),
         )
 
 
@@ -247,13 +260,17 @@ class WallObservation:
 
 @dataclass(frozen=True)
 class Observations:
-    """The detector's output for one frame, also when it found no wall."""
+    """The detector's output for one frame, also when it found no wall.
+
+    ``resends`` is copied from the frame: the mapper waits for a missing frame only then.
+    """
 
     run: str
     seq: int
     stamp: float
     frame: str
     walls: list[WallObservation] = field(default_factory=list)
+    resends: bool = False
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
@@ -263,6 +280,7 @@ class Observations:
             "stamp": self.stamp,
             "frame": self.frame,
             "walls": [w.to_map() for w in self.walls],
+            "resends": self.resends,
         }
 
     @classmethod
@@ -279,6 +297,7 @@ class Observations:
             stamp=_finite(m, "stamp"),
             frame=_str(m, "frame", "base_link"),
             walls=[WallObservation.from_map(w) for w in walls],
+            resends=_flag(m, "resends"),
         )
 
 

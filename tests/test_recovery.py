@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import signal
 import time
+from dataclasses import replace
 
+import numpy as np
 import pytest
 
-from wallmap.common.codec import decode
+from wallmap.common.codec import MessageError, decode, encode
 from wallmap.common.evaluation import evaluate_map
+from wallmap.common.messages import Frame, pack, unpack_frame
 from wallmap.common.scene import load_truth, write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-
-pytestmark = pytest.mark.e2e
+from wallmap.services.mapper.service import _InOrder
 
 N_FRAMES = 300
 
@@ -72,6 +74,7 @@ def _score(reply, scene):
     return evaluate_map(reply["walls"], plan, seen)
 
 
+@pytest.mark.e2e
 def test_detector_killed_mid_bag_loses_no_frame(stack, scene) -> None:
     stack.start("mapper", "mapper", *stack.zenoh_args)
     detector = stack.start("detector", "detector", *stack.zenoh_args)
@@ -90,6 +93,7 @@ def test_detector_killed_mid_bag_loses_no_frame(stack, scene) -> None:
     assert score.precision >= 0.9
 
 
+@pytest.mark.e2e
 def test_router_restarted_mid_bag_loses_no_frame(stack, scene) -> None:
     stack.start("mapper", "mapper", *stack.zenoh_args)
     stack.start("detector", "detector", *stack.zenoh_args)
@@ -104,3 +108,25 @@ def test_router_restarted_mid_bag_loses_no_frame(stack, scene) -> None:
     reply = _play_with_a_fault(stack, scene, restart_router, loses_frames=False)
     assert reply["frames"] == N_FRAMES
     assert _score(reply, scene).recall >= 0.9
+
+
+@pytest.mark.parametrize("resends", [True, False])
+def test_each_run_is_taken_once_in_order_and_gaps_wait_only_for_a_resending_player(resends):
+    order = _InOrder()
+    assert order.take("a", 5, resends=resends) is None  # first seen mid-way: starts there
+    gap = order.take("a", 7, resends=resends)
+    assert gap == ("out_of_order" if resends else None)  # real time skips the lost frame 6
+    if resends:
+        assert order.take("a", 6, resends=True) is None
+        assert order.take("a", 7, resends=True) is None
+    assert order.take("a", 6, resends=resends) == "resent"
+
+
+def test_the_resends_flag_is_optional_and_must_be_a_boolean():
+    frame = Frame("r", 0, 1.0, "cam", np.zeros((1, 2, 3), np.float32), np.eye(4))
+    message = frame.to_map()
+    del message["resends"]
+    assert unpack_frame(encode(message)).resends is False  # older players
+    with pytest.raises(MessageError, match="'resends' must be true or false"):
+        unpack_frame(encode({**frame.to_map(), "resends": 1}))
+    assert unpack_frame(pack(replace(frame, resends=True))).resends is True

@@ -98,5 +98,10 @@ class WallDetector:
             if line.offset >= self.config.min_distance
         ]
         return Observations(
-            run=frame.run, seq=frame.seq, stamp=frame.stamp, frame="base_link", walls=walls
+            run=frame.run,
+            seq=frame.seq,
+            stamp=frame.stamp,
+            frame="base_link",
+            walls=walls,
+            resends=frame.resends,
         )

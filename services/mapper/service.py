@@ -195,17 +195,20 @@ class _InOrder:
     A frame the player sends again after its acknowledgements stalled (a detector or router
     restarted and frames were lost on the way) may already have been taken, or may follow a
     gap: the first is a duplicate, the second waits for the frames before it, which the player
-    sends again too. A run first seen mid-way (the mapper started late) starts where it is.
+    sends again too. A player that does not send again (real-time playback) has its gaps
+    skipped. A run first seen mid-way (the mapper started late) starts where it is.
     """
 
     def __init__(self) -> None:
         self._next: collections.OrderedDict[str, int] = collections.OrderedDict()
 
-    def take(self, run: str, seq: int) -> str | None:
+    def take(self, run: str, seq: int, *, resends: bool) -> str | None:
         """None to take frame ``seq`` of ``run`` now, else why not."""
         expected = self._next.get(run, seq)
-        if seq != expected:
-            return "resent" if seq < expected else "out_of_order"
+        if seq < expected:
+            return "resent"
+        if seq > expected and resends:
+            return "out_of_order"
         self._next[run] = seq + 1
         self._next.move_to_end(run)
         while len(self._next) > MAX_RUNS:
@@ -240,7 +243,10 @@ def _observations(
             except MessageError as err:
                 core.stats.refuse("observations", str(err))
             else:
-                if (skipped := order.take(observations.run, observations.seq)) is None:
+                skipped = order.take(
+                    observations.run, observations.seq, resends=observations.resends
+                )
+                if skipped is None:
                     pending.append((time.monotonic(), observations))
                 else:
                     core.stats.add(skipped)

@@ -253,6 +253,7 @@ class _Outlet:
         self._poses = session.declare_publisher(keys.pose, congestion_control=block)
         self._progress = session.declare_publisher(keys.player_progress)
         self._run, self._sensor, self._playback = run_id, sensor, playback
+        self.resends = playback.fast  # only --fast waits for acknowledgements, and sends again
         self.published = self.poses = 0
         self.bar = _ProgressLine(bag.frame_count)
         self.state: dict[str, Any] = {
@@ -278,7 +279,7 @@ class _Outlet:
             self.poses += 1
         message = Frame(
             self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-            frame.T_base_sensor, self._sensor,
+            frame.T_base_sensor, self._sensor, self.resends,
         )  # fmt: skip
         self._frames.put(pack(message))
         self._sent.append((self.published, frame.bag_time))
