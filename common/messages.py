@@ -303,12 +303,17 @@ class Observations:
 
 @dataclass(frozen=True)
 class Progress:
-    """The mapper's acknowledgement of one player run: frames processed so far."""
+    """The mapper's acknowledgement of one player run: frames processed so far.
+
+    ``epoch`` names the mapper process: a mapper restarted on its state file acknowledges less
+    than the one before it did, and a player takes that (and sends again) only from a new epoch.
+    """
 
     run: str
     processed: int
     integrated: int
     dropped: int
+    epoch: str = ""
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
@@ -317,6 +322,7 @@ class Progress:
             "processed": self.processed,
             "integrated": self.integrated,
             "dropped": self.dropped,
+            "epoch": self.epoch,
         }
 
     @classmethod
@@ -328,6 +334,7 @@ class Progress:
             processed=_int(m, "processed"),
             integrated=_int(m, "integrated"),
             dropped=_int(m, "dropped"),
+            epoch=_str(m, "epoch", ""),
         )
 
 

@@ -6,6 +6,7 @@ acknowledgements stall, the player sends the frames again from the first one not
 
 from __future__ import annotations
 
+import math
 import signal
 import time
 from dataclasses import replace
@@ -130,3 +131,41 @@ def test_the_resends_flag_is_optional_and_must_be_a_boolean():
     with pytest.raises(MessageError, match="'resends' must be true or false"):
         unpack_frame(encode({**frame.to_map(), "resends": 1}))
     assert unpack_frame(pack(replace(frame, resends=True))).resends is True
+
+
+@pytest.mark.e2e
+def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_path) -> None:
+    """SIGKILL the mapper mid-bag, restart it on its state file: every frame, the same walls."""
+    whole = tmp_path / "whole.json"
+    stack.start("mapper", "mapper", "--state", str(whole), *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    played = stack.run("player", str(scene.path), "--fast", *stack.zenoh_args)
+    assert played.returncode == 0, played.stderr
+    reference = stack.query("--min-obs", "3")
+    for service in stack.services[1:]:
+        service.stop()
+    stack.prefix += "-killed"  # a fresh set of services beside the first
+    state = tmp_path / "killed.json"
+    mapper = stack.start("mapper-2", "mapper", "--state", str(state), *stack.zenoh_args)
+    stack.start("detector-2", "detector", *stack.zenoh_args)
+
+    def kill_and_restart() -> None:
+        time.sleep(3.0)  # the mapper saves its state every 2 s
+        mapper.proc.send_signal(signal.SIGKILL)
+        mapper.proc.wait()
+        assert state.exists()
+        stack.start("mapper-3", "mapper", "--state", str(state), *stack.zenoh_args)
+
+    reply = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
+    assert reply["frames"] == N_FRAMES == reference["frames"]
+    assert reply["dropped"] == 0
+    mine = {w["id"]: w for w in reply["walls"]}
+    theirs = {w["id"]: w for w in reference["walls"]}
+    assert set(mine) == set(theirs), "the same walls, with the same ids"
+    # The detector samples RANSAC afresh for the frames sent again, so lines differ a little.
+    for wall_id, wall in mine.items():
+        a0, a1, b0, b1 = (np.asarray(w[k]) for w in (wall, theirs[wall_id]) for k in ("p0", "p1"))
+        da, db = (a1 - a0) / np.linalg.norm(a1 - a0), (b1 - b0) / np.linalg.norm(b1 - b0)
+        assert math.degrees(math.acos(min(abs(float(da @ db)), 1.0))) < 1.0
+        normal = np.array([-db[1], db[0]])
+        assert abs(float(normal @ ((a0 + a1) / 2 - b0))) < 0.02

@@ -14,7 +14,9 @@ import collections
 import json
 import threading
 import time
-from dataclasses import dataclass, field
+import uuid
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import zenoh
@@ -62,13 +64,18 @@ class MapperSettings:
 class MapperCore:
     """The map, the pose buffer and per-run counters behind one lock, shared by the workers."""
 
-    def __init__(self, wall_map: WallMap, poses: PoseBuffer, stats: Stats) -> None:
+    def __init__(
+        self, wall_map: WallMap, poses: PoseBuffer, stats: Stats, runs: Iterable[Progress] = ()
+    ) -> None:
         self.map = wall_map
         self.poses = poses
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
-        self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict()
+        self.epoch = uuid.uuid4().hex[:12]  # this process, in every acknowledgement
+        self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict(
+            (r.run, replace(r, epoch=self.epoch)) for r in runs
+        )
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
 
     def count(self, run: str, seq: int, *, integrated: bool) -> Progress:
@@ -83,6 +90,7 @@ class MapperCore:
             seq + 1,
             old.integrated + int(integrated),
             old.dropped + int(not integrated),
+            self.epoch,
         )
         self.runs[run] = new
         while len(self.runs) > MAX_RUNS:
@@ -124,7 +132,8 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     wall_map = state_file.load(mapper.state, mapper.map) if mapper.state else WallMap(mapper.map)
     if wall_map.walls:
         log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
-    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats)
+    runs = state_file.load_runs(mapper.state) if mapper.state else []
+    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs)
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
@@ -168,7 +177,7 @@ def _save(core: MapperCore, path: Path | None) -> None:
     with core.lock:
         if not core.dirty:
             return
-        document = state_file.to_json(core.map)
+        document = state_file.to_json(core.map, core.runs.values())
         core.dirty = False
     state_file.write(path, document)
 
@@ -199,8 +208,10 @@ class _InOrder:
     skipped. A run first seen mid-way (the mapper started late) starts where it is.
     """
 
-    def __init__(self) -> None:
-        self._next: collections.OrderedDict[str, int] = collections.OrderedDict()
+    def __init__(self, runs: Iterable[Progress] = ()) -> None:
+        self._next: collections.OrderedDict[str, int] = collections.OrderedDict(
+            (r.run, r.processed) for r in runs
+        )
 
     def take(self, run: str, seq: int, *, resends: bool) -> str | None:
         """None to take frame ``seq`` of ``run`` now, else why not."""
@@ -224,9 +235,10 @@ def _observations(
 ) -> None:
     """Fold observations into the map in arrival order, each once its pose is known."""
     pending: collections.deque[tuple[float, Observations]] = collections.deque()
-    acks: dict[str, Progress] = {}  # the latest progress of each run, not yet published
+    with core.lock:  # runs restored from the state file: say where they stand, first thing
+        acks: dict[str, Progress] = dict(core.runs)  # the latest progress, not yet published
+        order = _InOrder(core.runs.values())
     unacked = 0  # frames processed since the last acknowledgement
-    order = _InOrder()
     while True:
         try:
             if not pending:

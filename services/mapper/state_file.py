@@ -10,11 +10,13 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from wallmap.common.messages import Progress
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.wall_map import MapperConfig, Wall, WallMap
 
@@ -25,10 +27,15 @@ class StateError(RuntimeError):
     """The state file cannot be used; the message says why, in one line."""
 
 
-def to_json(wall_map: WallMap) -> dict[str, Any]:
-    """Everything needed to carry on where the map stopped."""
+def to_json(wall_map: WallMap, runs: Iterable[Progress] = ()) -> dict[str, Any]:
+    """Everything needed to carry on where the map stopped.
+
+    ``runs`` are the players' runs as far as this map has taken them: a mapper restarted on the
+    file acknowledges them from there, and the players send it the rest again.
+    """
     return {
         "v": STATE_VERSION,
+        "runs": [[r.run, r.processed, r.integrated, r.dropped] for r in runs],
         "next_id": wall_map.next_id,
         "frames": wall_map.frames,
         "observations": wall_map.observations,
@@ -103,6 +110,18 @@ def write(path: Path, document: dict[str, Any]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def load_runs(path: Path) -> list[Progress]:
+    """The runs a state file records (none when it does not exist or predates them)."""
+    if not path.exists():
+        return []
+    try:
+        rows = json.loads(path.read_text(encoding="utf-8")).get("runs", [])
+        return [Progress(str(run), int(n), int(i), int(d)) for run, n, i, d in rows]
+    except (OSError, ValueError, TypeError, AttributeError) as err:
+        msg = f"state file {path} has unusable runs ({type(err).__name__}: {err}); move it away"
+        raise StateError(msg) from err
 
 
 def load(path: Path, config: MapperConfig) -> WallMap:

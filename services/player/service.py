@@ -136,6 +136,7 @@ class _Acks:
         self.run = run
         self.processed = 0
         self.integrated = 0
+        self.epoch: str | None = None  # the mapper process acknowledging
         self.last_change = self.last_resend = time.monotonic()
 
     def poll(self) -> None:
@@ -144,7 +145,12 @@ class _Acks:
                 progress = unpack_progress(sample.payload.to_bytes())
             except MessageError:
                 continue
-            if progress.run == self.run and progress.processed > self.processed:
+            if progress.run != self.run:
+                continue
+            # A new mapper process (restarted on its state file) may stand behind the old one:
+            # its word counts, and what it lacks is sent again.
+            if progress.epoch != self.epoch or progress.processed > self.processed:
+                self.epoch = progress.epoch
                 self.processed, self.integrated = progress.processed, progress.integrated
                 self.last_change = time.monotonic()
 
