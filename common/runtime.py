@@ -81,6 +81,31 @@ def received_frames(channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats)
         yield frame
 
 
+def newest_frame(
+    channel: zenoh.handlers.Handler[zenoh.Sample], frame: Frame, stats: Stats
+) -> Frame:
+    """In real-time playback, the newest frame waiting instead of ``frame``; the older are dropped.
+
+    A service slower than the bag must not fall further and further behind: it skips to the
+    newest frame, counts what it skipped and says so. Frames of a player that sends again
+    (``--fast``) are never dropped: that player waits for the pipeline instead.
+    """
+    while not frame.resends and (sample := channel.try_recv()) is not None:
+        stats.add("received")
+        try:
+            newer = unpack_frame(sample.payload.to_bytes())
+        except MessageError as err:
+            stats.refuse("frame", str(err))
+            continue
+        stats.note(
+            "dropped",
+            "behind",
+            "dropping the oldest frames: slower than real-time playback (--fast loses none)",
+        )
+        frame = newer
+    return frame
+
+
 class Presence:
     """A service's liveliness token and its counters' queryable: what ``wallmap status`` reads.
 

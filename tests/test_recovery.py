@@ -6,6 +6,7 @@ acknowledgements stall, the player sends the frames again from the first one not
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import time
@@ -13,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import zenoh
 
 from wallmap.common.codec import MessageError, decode, encode
 from wallmap.common.evaluation import evaluate_map
@@ -169,3 +171,34 @@ def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_pat
         assert math.degrees(math.acos(min(abs(float(da @ db)), 1.0))) < 1.0
         normal = np.array([-db[1], db[0]])
         assert abs(float(normal @ ((a0 + a1) / 2 - b0))) < 0.02
+
+
+@pytest.mark.e2e
+def test_a_slow_detector_drops_the_oldest_real_time_frames_and_never_fast_ones(stack) -> None:
+    stack.start("detector", "detector", *stack.zenoh_args)
+    keys = Keys(stack.prefix)
+    rng = np.random.default_rng(1)
+    wall = np.column_stack([np.full(400, 2.0), np.linspace(-2, 2, 400), np.zeros(400)])
+    points = (wall + rng.normal(0, 0.003, wall.shape)).astype(np.float32)[None]
+    settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
+
+    def counters() -> dict:
+        out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
+        return next(s["counters"] for s in json.loads(out.stdout) if s["service"] == "detector")
+
+    with open_session(settings) as session:
+        block = zenoh.CongestionControl.BLOCK
+        frames = session.declare_publisher(keys.frames, congestion_control=block)
+        _until(lambda: any(True for _ in session.liveliness().get(keys.health("detector"))))
+        for run, resends in (("fast", True), ("real-time", False)):
+            for seq in range(400):  # far faster than the detector takes them
+                frame = Frame(run, seq, 1.0 + seq, "cam", points, np.eye(4), "depth", resends)
+                frames.put(pack(frame))
+            time.sleep(2.0)
+            seen = counters()
+            if resends:
+                assert seen["received"] == seen["published"] == 400
+                assert "dropped" not in seen
+    assert seen["received"] == 800
+    assert seen["dropped"] > 0, "the real-time backlog was dropped"
+    assert seen["published"] + seen["dropped"] == 800

@@ -15,7 +15,14 @@ from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
 from wallmap.common.messages import pack
 from wallmap.common.ransac import RowReport
-from wallmap.common.runtime import Presence, Stats, drain, received_frames, setup_logging
+from wallmap.common.runtime import (
+    Presence,
+    Stats,
+    drain,
+    newest_frame,
+    received_frames,
+    setup_logging,
+)
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
@@ -80,7 +87,8 @@ def _work(
     Each frame's diagnostics (points, clusters, lines, what was turned down and why) go out on
     their own key; Zenoh sends nothing when nobody listens.
     """
-    for frame in received_frames(channel, stats):
+    for received in received_frames(channel, stats):
+        frame = newest_frame(channel, received, stats)
         report = RowReport()
         observations = detector.detect(frame, report)
         publisher.put(pack(observations))
