@@ -8,13 +8,15 @@ version; anything else is refused with a :class:`MessageError` that says why.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import msgpack
 import numpy as np
 
 SCHEMA_VERSION = 1
-MAX_ARRAY_BYTES = 256 * 1024 * 1024
+# Whole 1280x720 clouds are 11 MB; anything far larger is a mistake or an attack.
+MAX_PAYLOAD_BYTES = 64 * 1024 * 1024
 _ND = "__nd__"
 _ALLOWED_DTYPES = frozenset({"<f4", "<f8", "<i4", "<i8", "<u2", "|u1", "|i1", "<u4"})
 
@@ -52,8 +54,8 @@ def _unpack_hook(obj: dict[Any, Any]) -> object:
         msg = "array data must be bytes"
         raise MessageError(msg)
     dtype = np.dtype(dtype_str)
-    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
-    if count * dtype.itemsize != len(data) or len(data) > MAX_ARRAY_BYTES:
+    count = math.prod(shape)  # Python ints: a crafted shape cannot overflow into a match
+    if count * dtype.itemsize != len(data):
         msg = f"array of shape {shape} and dtype {dtype_str} does not match {len(data)} bytes"
         raise MessageError(msg)
     return np.frombuffer(data, dtype=dtype).reshape(shape)
@@ -70,6 +72,9 @@ def decode(payload: bytes) -> dict[str, Any]:
     Raises:
         MessageError: not msgpack, not a map, or a missing or unknown version.
     """
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        msg = f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD_BYTES}"
+        raise MessageError(msg)
     try:
         obj = msgpack.unpackb(payload, object_hook=_unpack_hook, raw=False, strict_map_key=True)
     except MessageError:
@@ -81,7 +86,7 @@ def decode(payload: bytes) -> dict[str, Any]:
         msg = f"payload is a {type(obj).__name__}, not a map"
         raise MessageError(msg)
     version = obj.get("v")
-    if version != SCHEMA_VERSION:
+    if type(version) is not int or version != SCHEMA_VERSION:  # not True, not an array
         msg = f"unsupported schema version {version!r} (this build speaks v{SCHEMA_VERSION})"
         raise MessageError(msg)
     return obj

@@ -53,7 +53,12 @@ class RowSelection:
         except (KeyError, TypeError, ValueError) as err:
             msg = f"malformed row selection: {err}"
             raise MessageError(msg) from err
-        if mode not in ("band", "row") or not low < high or not 0.0 <= fraction <= 1.0:
+        if (
+            not isinstance(mode, str)
+            or mode not in ("band", "row")
+            or not low < high
+            or not 0.0 <= fraction <= 1.0
+        ):
             msg = f"row selection out of range: {m!r}"
             raise MessageError(msg)
         return cls(mode, band, fraction)

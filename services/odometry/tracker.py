@@ -29,6 +29,8 @@ from wallmap.common.scan_matching import (
 )
 
 Array = NDArray[np.float64]
+# What a malformed wall record raises on the way in (a field missing, of a wrong type or size).
+RECORD_ERRORS = (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError)
 
 
 @dataclass(frozen=True)
@@ -116,8 +118,12 @@ class PoseTracker:
         Raises:
             MessageError: A record is malformed (the others are still taken).
         """
-        for wall_id in removed:
-            self._walls.pop(int(wall_id), None)
+        try:
+            records, gone = list(records), [int(wall_id) for wall_id in removed]
+        except RECORD_ERRORS as err:
+            raise MessageError(f"malformed map update: {err}") from err
+        for wall_id in gone:
+            self._walls.pop(wall_id, None)
         problem: MessageError | None = None
         for record in records:
             try:
@@ -125,7 +131,7 @@ class PoseTracker:
                 usable = int(record["n_obs"]) >= self.config.wall_min_obs
                 usable = usable and not record.get("tentative", False)
                 lines = wall_lines(record) if usable else []
-            except (KeyError, TypeError, ValueError, MessageError) as err:
+            except (*RECORD_ERRORS, MessageError) as err:
                 problem = MessageError(f"malformed wall record: {err}")
                 continue
             if lines:
