@@ -50,8 +50,11 @@ def _until(check, timeout: float = 30.0):
     raise TimeoutError
 
 
-def _play_with_a_fault(stack, scene, fault, *, loses_frames: bool) -> dict:
-    """Play with --fast, pause mid-bag, apply ``fault``, resume; the final map reply."""
+def _play_with_a_fault(stack, scene, fault, *, loses_frames: bool) -> tuple[dict, float]:
+    """Play with --fast, pause mid-bag, apply ``fault``, resume.
+
+    Returns the final map reply, and how long after the fault the player answered again.
+    """
     keys = Keys(stack.prefix)
     player = stack.start(
         "player", "player", str(scene.path), "--fast", "--paused", *stack.zenoh_args
@@ -63,13 +66,15 @@ def _play_with_a_fault(stack, scene, fault, *, loses_frames: bool) -> dict:
         _until(lambda: (s := _control(session, keys, "status")) and s["published"] >= 100)
         _control(session, keys, "pause")
         fault()
+        after_fault = time.monotonic()
         _until(lambda: _control(session, keys, "resume"))
+        answered = time.monotonic() - after_fault
     assert player.proc.wait(timeout=120) == 0, player.output()
     assert f"published {N_FRAMES} frames" in player.output()
     assert f"the mapper integrated {N_FRAMES}" in player.output()
     if loses_frames:  # else it depends on who reconnects first
         assert "sending again from frame" in player.output(), "the fault lost frames: test it"
-    return stack.query("--min-obs", "3")
+    return stack.query("--min-obs", "3"), answered
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +110,7 @@ def test_detector_killed_mid_bag_loses_no_frame(stack, scene, reference) -> None
         detector.proc.wait()
         stack.start("detector-2", "detector", *stack.zenoh_args)
 
-    reply = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
+    reply, _ = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
     assert reply["dropped"] == 0
     assert_same_walls(reply, reference)
 
@@ -122,7 +127,9 @@ def test_router_restarted_mid_bag_loses_no_frame(stack, scene, reference) -> Non
         time.sleep(1.0)
         stack.start("router-2", "router", "--listen", stack.endpoint)
 
-    reply = _play_with_a_fault(stack, scene, restart_router, loses_frames=False)
+    reply, reconnected = _play_with_a_fault(stack, scene, restart_router, loses_frames=False)
+    print(f"\nthe player answered {reconnected:.1f} s after the new router started")
+    assert reconnected < 5.0, "services reconnect by themselves within 5 s"
     assert_same_walls(reply, reference)
 
 
@@ -171,7 +178,7 @@ def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_pat
         assert state.exists()
         stack.start("mapper-3", "mapper", "--state", str(state), *stack.zenoh_args)
 
-    reply = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
+    reply, _ = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
     assert reply["dropped"] == 0
     assert_same_walls(reply, uninterrupted)
 
