@@ -14,7 +14,7 @@ import threading
 import numpy as np
 import zenoh
 
-from wallmap.common.codec import MessageError, decode
+from wallmap.common.codec import MessageError
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, received_frames, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
@@ -50,13 +50,15 @@ def run(
             keys.pose, congestion_control=zenoh.CongestionControl.BLOCK
         )
         frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
-        updates = session.declare_subscriber(keys.map_updates, zenoh.handlers.FifoChannel(256))
+        updates = None
+        if config.use_walls:
+            updates = session.declare_subscriber(keys.map_updates, zenoh.handlers.FifoChannel(256))
         token = Presence(session, keys, "odometry", stats)
         if config.use_walls:
             _first_walls(session, keys, tracker, stats)
         worker = threading.Thread(
             target=_work,
-            args=(frames.handler, updates.handler, tracker, rows, publisher, stats),
+            args=(frames.handler, updates and updates.handler, tracker, rows, publisher, stats),
             daemon=True,
         )
         worker.start()
@@ -70,7 +72,8 @@ def run(
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
         frames.undeclare()
-        updates.undeclare()
+        if updates is not None:
+            updates.undeclare()
         worker.join(timeout=5.0)
     return stats
 
@@ -89,21 +92,16 @@ def _first_walls(session: zenoh.Session, keys: Keys, tracker: PoseTracker, stats
 def _take_updates(
     channel: zenoh.handlers.Handler[zenoh.Sample], tracker: PoseTracker, stats: Stats
 ) -> None:
-    if not tracker.config.use_walls:
-        while channel.try_recv() is not None:
-            pass
-        return
     while (sample := channel.try_recv()) is not None:
         try:
-            update = decode(sample.payload.to_bytes())
-            tracker.set_walls(update.get("walls", []), update.get("removed", []))
-        except (MessageError, AttributeError) as err:  # AttributeError: not a map at all
+            tracker.take_update(sample.payload.to_bytes())
+        except MessageError as err:
             stats.refuse("map update", str(err))
 
 
 def _work(
     frames: zenoh.handlers.Handler[zenoh.Sample],
-    updates: zenoh.handlers.Handler[zenoh.Sample],
+    updates: zenoh.handlers.Handler[zenoh.Sample] | None,
     tracker: PoseTracker,
     rows: RowSelection,
     publisher: zenoh.Publisher,
@@ -118,7 +116,8 @@ def _work(
                 "scan matching on a depth camera's row (about 60 degrees wide) is unreliable; "
                 "prefer a lidar, or give the player a pose source (docs/real-data.md)",
             )
-        _take_updates(updates, tracker, stats)
+        if updates is not None:  # the walls are used
+            _take_updates(updates, tracker, stats)
         scan = select_scan(frame.points, frame.base_from_sensor, rows)
         estimate = tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp)
         if not estimate.registration.accepted:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common.codec import MessageError
+from wallmap.common.codec import MessageError, decode
 from wallmap.common.messages import Pose
 from wallmap.common.scan_matching import (
     MatcherConfig,
@@ -140,6 +140,15 @@ class PoseTracker:
                 self._walls.pop(wall_id, None)
         if problem is not None:
             raise problem
+
+    def take_update(self, payload: bytes) -> None:
+        """Take a ``{prefix}/map/updates`` message: the walls that changed, the ids removed.
+
+        Raises:
+            MessageError: The message, or a record in it, is malformed.
+        """
+        update = decode(payload)
+        self.set_walls(update.get("walls", []), update.get("removed", []))
 
     def _walls_near(self, position: Array) -> list[WallLine]:
         """Walls with a part within the matcher's range of a position."""
