@@ -69,16 +69,21 @@ class Stats:
             return dict(self._counts)
 
 
+def _frame_of(sample: zenoh.Sample, stats: Stats) -> Frame | None:
+    """A received sample as a frame, counted; None (refused and counted) when malformed."""
+    stats.add("received")
+    try:
+        return unpack_frame(sample.payload.to_bytes())
+    except MessageError as err:
+        stats.refuse("frame", str(err))
+        return None
+
+
 def received_frames(channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats) -> Iterator[Frame]:
     """The sensor frames a subscriber receives, counted; malformed ones refused and counted."""
     for sample in drain(channel):
-        stats.add("received")
-        try:
-            frame = unpack_frame(sample.payload.to_bytes())
-        except MessageError as err:
-            stats.refuse("frame", str(err))
-            continue
-        yield frame
+        if (frame := _frame_of(sample, stats)) is not None:
+            yield frame
 
 
 def newest_frame(
@@ -91,11 +96,7 @@ def newest_frame(
     (``--fast``) are never dropped: that player waits for the pipeline instead.
     """
     while not frame.resends and (sample := channel.try_recv()) is not None:
-        stats.add("received")
-        try:
-            newer = unpack_frame(sample.payload.to_bytes())
-        except MessageError as err:
-            stats.refuse("frame", str(err))
+        if (newer := _frame_of(sample, stats)) is None:
             continue
         stats.note(
             "dropped",

@@ -9,7 +9,7 @@ from rosbags.typesys import Stores, get_typestore
 from wallmap.services.player.depth import _rays, depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.laserscan import laserscan_to_xyz
-from wallmap.services.player.pointcloud import pointcloud2_to_xyz, pointcloud2_xyz
+from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 
 ROS2 = get_typestore(Stores.ROS2_HUMBLE).types
 ROS1 = get_typestore(Stores.ROS1_NOETIC).types
@@ -62,6 +62,11 @@ def make_cloud(
         data=buf,
         is_dense=False,
     )
+
+
+def pointcloud2_to_xyz(msg: object, rows: slice = slice(None)) -> np.ndarray:
+    """A cloud's rows as the player hands them out: a fresh float32 copy, NaN for no return."""
+    return invalid_to_nan(np.array(pointcloud2_xyz(msg, rows), dtype=np.float32))
 
 
 def random_xyz(height: int = 4, width: int = 5) -> np.ndarray:

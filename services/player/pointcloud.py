@@ -122,11 +122,3 @@ def invalid_to_nan(points: np.ndarray) -> np.ndarray:
         for axis in range(3):
             points[..., axis] += penalty
     return points
-
-
-def pointcloud2_to_xyz(msg: Any, rows: slice = slice(None)) -> np.ndarray:
-    """Decode a PointCloud2's rows into a fresh native float32 (rows, width, 3) array.
-
-    As ``pointcloud2_xyz``, and points with any non-finite coordinate become all-NaN.
-    """
-    return invalid_to_nan(np.array(pointcloud2_xyz(msg, rows), dtype=np.float32))
