@@ -133,6 +133,8 @@ def main() -> None:
     parser.add_argument("--seeds", default="600,601,602", help="generated scenes for part 2")
     parser.add_argument("--frames", type=int, default=600, help="frames per generated scene")
     args = parser.parse_args()
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
     if REAL.is_dir():
         real_bags(args.out)
     else:

@@ -46,6 +46,12 @@ class RansacParams:
         max_angle_sd: lines less sure of their direction than this are dropped (rad): a short,
             far, noisy segment cannot tell two walls meeting at a shallow angle apart, and fed
             to the map it blends them into a wall that is neither.
+        lone_angle_sd: ...but a line that holds ``lone_share`` of its cluster's points and is
+            at least ``lone_length`` (m) long is kept up to this (rad): it has no neighbour in
+            the cluster to blend with, and a far wall glimpsed a few times is often seen no
+            better. The map's shadow rule catches the rare blend that gets through.
+        lone_share: see above.
+        lone_length: see above.
         corner_reach: two lines of one cluster whose ends lie this close to their intersection
             (m) meet there: near a corner the inlier band takes in the other wall's points and
             would carry each line past the corner.
@@ -68,6 +74,9 @@ class RansacParams:
     cov_scale: float = 4.0
     split_f: float = 6.0
     max_angle_sd: float = 0.04
+    lone_angle_sd: float = 0.1
+    lone_share: float = 0.9
+    lone_length: float = 0.5
     corner_reach: float = 0.4
     corner_angle: float = np.radians(3.0)
     nan_run: int = 0
@@ -202,7 +211,7 @@ def find_lines(
             seg_fit = fit if whole else fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
             if seg_fit.length < params.min_length:
                 rejected["shorter than min_length"] += 1
-            elif seg_fit.angle_sd > params.max_angle_sd:
+            elif seg_fit.angle_sd > _angle_sd_limit(seg_fit, len(seg) / len(points), params):
                 rejected["direction less sure than max_angle_sd"] += 1
             else:
                 lines.append(seg_fit)
@@ -211,6 +220,13 @@ def find_lines(
             break
         remaining = np.delete(remaining, np.concatenate(accepted))
     return lines
+
+
+def _angle_sd_limit(fit: LineFit, share: float, params: RansacParams) -> float:
+    """The least sure direction accepted for a line holding ``share`` of its cluster."""
+    if share >= params.lone_share and fit.length >= params.lone_length:
+        return max(params.max_angle_sd, params.lone_angle_sd)
+    return params.max_angle_sd
 
 
 def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]:

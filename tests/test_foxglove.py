@@ -222,9 +222,11 @@ def test_observations_are_placed_with_the_pose_at_their_stamp() -> None:
     fb = pytest.importorskip("wallmap.foxglove_bridge")
     bridge = fb.Bridge()
     segment = ((1.0, 0.0), (1.0, 1.0))
-    assert bridge.observations(_obs(0.5, segment)) == []  # no pose yet: nowhere to draw
-    for t in (0.0, 0.1, 0.2):
-        bridge.pose(Pose(stamp=t, x=10.0 * t, y=0.0, yaw=math.pi / 2))
+    assert bridge.observations(_obs(0.0, segment)) == []  # no pose yet: it waits for one
+    first = bridge.pose(Pose(stamp=0.0, x=0.0, y=0.0, yaw=math.pi / 2))
+    assert [out.topic for out in first] == ["/wallmap/pose", "/tf", "/wallmap/observations"]
+    assert len(bridge.pose(Pose(stamp=0.1, x=1.0, y=0.0, yaw=math.pi / 2))) == 2  # sent once
+    bridge.pose(Pose(stamp=0.2, x=2.0, y=0.0, yaw=math.pi / 2))
 
     def points(stamp: float) -> list[tuple[float, float, float]]:
         (out,) = bridge.observations(_obs(stamp, segment))

@@ -114,3 +114,33 @@ def test_line_through_is_the_fits_line() -> None:
         normal, offset = line_through(points, sigmas)
         np.testing.assert_allclose(normal, fit.normal, atol=1e-12)
         assert offset == pytest.approx(fit.offset, abs=1e-12)
+
+
+def far_glimpse(rng, share_of_cluster: bool) -> np.ndarray:
+    """18 points over 0.7 m of a wall 5 m away (a Kinect's noise), alone or beside a near wall."""
+    wall = np.column_stack([np.linspace(-0.35, 0.35, 18), np.full(18, 5.0)])
+    wall[:, 1] += rng.normal(0, 1.425e-3 * 25, 18)
+    if not share_of_cluster:
+        return wall
+    near = np.column_stack([np.linspace(0.4, 2.0, 40), np.linspace(4.9, 3.0, 40)])
+    return np.vstack([wall, near + rng.normal(0, 0.005, (40, 2))])
+
+
+def test_a_far_wall_alone_in_its_cluster_is_kept_though_its_direction_is_unsure():
+    params = RansacParams()
+    scan = far_glimpse(np.random.default_rng(5), False)
+    (line,) = detect_lines(scan, params, np.random.default_rng(0))
+    assert params.max_angle_sd < line.angle_sd <= params.lone_angle_sd  # the rule was needed
+    assert abs(line.normal[1]) == pytest.approx(1.0, abs=0.02)
+    assert line.offset == pytest.approx(5.0, abs=0.05)
+
+
+def test_the_same_glimpse_beside_another_wall_is_refused_as_unsure():
+    scan = far_glimpse(np.random.default_rng(5), True)
+    lines = detect_lines(scan, RansacParams(), np.random.default_rng(0))
+    loose = detect_lines(scan, RansacParams(max_angle_sd=1.0), np.random.default_rng(0))
+    far = [line for line in loose if line.offset > 4.5 and abs(line.normal[1]) > 0.99]
+    assert far  # found...
+    assert far[0].angle_sd > RansacParams().max_angle_sd  # ...but unsure...
+    assert not [line for line in lines if line.offset > 4.5 and abs(line.normal[1]) > 0.99]
+    assert len(lines) == 1  # ...so only the near wall is kept

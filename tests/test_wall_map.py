@@ -334,3 +334,79 @@ def test_a_line_blended_across_a_shallow_corner_is_a_shadow_not_a_wall():
     assert [w["id"] for w in served] == [0]
     shadow = [w for w in wall_map.reply(MapQuery(tentative=True))["walls"] if w["id"] == 1]
     assert shadow[0]["tentative"]
+
+
+def seen_from(pose: tuple[float, float, float], a, b) -> WallObservation:
+    """A precise observation of the map segment a-b from ``pose``, in the robot frame."""
+    x, y, yaw = pose
+    rot = wall_model.rotation(yaw)
+    pa, pb = rot.T @ (np.asarray(a, float) - [x, y]), rot.T @ (np.asarray(b, float) - [x, y])
+    d = (pb - pa) / np.linalg.norm(pb - pa)
+    return WallObservation(pa - (pa @ d) * d, np.eye(2) * 1e-6, pa, pb, 40, 0.01)
+
+
+def turned(degrees: float, length: float, start=(0.0, 2.0)) -> np.ndarray:
+    """The point ``length`` from ``start`` in the direction ``degrees`` from +x."""
+    angle = np.radians(degrees)
+    return np.asarray(start) + length * np.array([np.cos(angle), np.sin(angle)])
+
+
+def integrate_views(wall_map: WallMap, segments, times: int, first: int = 0) -> None:
+    """Each map segment seen ``times`` times, from the robot driving along y = 0."""
+    for i in range(first, first + times):
+        pose = (-1.0 + 0.2 * (i - first), 0.0, np.pi / 2)
+        obs = [seen_from(pose, a, b) for a, b in segments]
+        wall_map.integrate(Observations("r", i, float(i), "base_link", obs), Pose(float(i), *pose))
+
+
+def nearest_end(wall: dict, point) -> np.ndarray:
+    """The end of a served wall nearest to ``point``."""
+    ends = np.array([wall["p0"], wall["p1"]])
+    return ends[np.argmin(np.linalg.norm(ends - point, axis=1))]
+
+
+def test_walls_meeting_at_a_shallow_corner_end_at_it_though_seen_past_it():
+    # A 12 degree kink at (0, 2); each wall is seen 0.5 m past the corner, as the inlier band
+    # of a far line takes in the other wall's points there: 0.1 m / sin 12 deg.
+    corner = np.array([0.0, 2.0])
+    past_a = ((-3.0, 2.0), (0.5, 2.0))
+    past_b = (turned(12.0, -0.5), turned(12.0, 3.0))
+    misses = {}
+    for band in (0.0, MapperConfig().corner_band):
+        wall_map = WallMap(MapperConfig(corner_band=band))
+        integrate_views(wall_map, [past_a, past_b], 6)
+        walls = wall_map.reply()["walls"]
+        assert len(walls) == 2
+        misses[band] = [float(np.linalg.norm(nearest_end(w, corner) - corner)) for w in walls]
+    assert max(misses[MapperConfig().corner_band]) < 0.02
+    assert min(misses[0.0]) == pytest.approx(0.5, abs=0.02)  # without it: 0.5 m past
+
+
+def test_a_doorway_at_a_square_corner_stays_open():
+    wall_map = WallMap()
+    integrate_views(wall_map, [((-3.0, 2.0), (-0.6, 2.0)), ((0.0, 2.0), (0.0, 5.0))], 6)
+    walls = wall_map.reply()["walls"]
+    assert len(walls) == 2
+    ends = sorted(nearest_end(w, (0.0, 2.0)).tolist() for w in walls)
+    np.testing.assert_allclose(ends, [[-0.6, 2.0], [0.0, 2.0]], atol=0.02)
+
+
+def test_a_line_blended_across_a_corner_lies_on_both_walls_and_is_a_shadow():
+    wall_map = WallMap()
+    integrate_views(wall_map, [((-3.0, 2.0), (0.0, 2.0)), ((0.0, 2.0), turned(14.0, 3.0))], 12)
+    # Seen from far, the corner came out as one short line halfway between the two walls.
+    integrate_views(wall_map, [(turned(7.0, -0.4), turned(7.0, 0.4))], 4, first=20)
+    assert len(wall_map.walls) == 3
+    served = wall_map.reply()["walls"]
+    assert len(served) == 2
+    blend = [w for w in wall_map.reply(MapQuery(tentative=True))["walls"] if w["tentative"]]
+    assert len(blend) == 1
+    assert blend[0]["n_obs"] == 4
+
+
+def test_a_wall_beside_a_better_seen_neighbour_at_a_shallow_corner_is_no_shadow():
+    wall_map = WallMap()
+    # The neighbour, seen 30 times; the wall, 6 times; both seen 0.5 m past their corner.
+    integrate_views(wall_map, [(turned(12.5, -0.5), turned(12.5, 4.0))], 30)
+    integrate_views(wall_map, [((-1.9, 2.0), (0.5, 2.0))], 6, first=40)
+    assert len(wall_map.reply()["walls"]) == 2

@@ -10,6 +10,7 @@ the ``foxglove`` extra (``foxglove-sdk``). Topics and schemas: ``docs/foxglove.m
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterable, Sequence
 from typing import Any, NamedTuple
 
@@ -58,6 +59,7 @@ LABEL = Color(r=0.9, g=0.9, b=0.9, a=1.0)
 WALL_THICKNESS = 0.05  # m
 OBSERVATION_THICKNESS = 0.03  # m
 OBSERVATION_HEIGHT = 0.02  # m above the walls, so a seen wall is not hidden under its map line
+EARLY_FRAMES = 64  # observations kept until the first pose arrives
 
 
 class Out(NamedTuple):
@@ -234,6 +236,8 @@ class Bridge:
         self.latest: dict[str, Out] = {}  # the last message of each LATCHED topic
         self._poses = PoseBuffer()
         self._last_pose: messages.Pose | None = None
+        # Frames come before the first pose when the pose and the detector race: held for it.
+        self._early: deque[messages.Observations] = deque(maxlen=EARLY_FRAMES)
 
     def _emit(self, topic: str, message: Any, ns: int) -> Out:
         out = Out(topic, message, ns)
@@ -272,20 +276,24 @@ class Bridge:
         self._poses.add(pose)
         self._last_pose = pose
         ns = nanoseconds(pose.stamp)
-        return [
+        out = [
             self._emit(POSE, pose_in_frame(pose), ns),
             self._emit(TF, frame_transforms(pose), ns),
         ]
+        while self._early:
+            out += self.observations(self._early.popleft())
+        return out
 
     def observations(self, obs: messages.Observations) -> list[Out]:
         """A frame's observations, placed with the pose at their stamp.
 
         When no pose covers the stamp yet (a pose source that lags), the latest pose stands in;
-        before any pose there is nowhere to draw them, and nothing is sent.
+        before any pose there is nowhere to draw them: the latest ``EARLY_FRAMES`` wait for it.
         """
         pose = self._poses.lookup(obs.stamp)
         if not isinstance(pose, messages.Pose):
             pose = self._last_pose
         if pose is None:
+            self._early.append(obs)
             return []
         return [self._emit(OBSERVATIONS, observations_scene(obs, pose), nanoseconds(obs.stamp))]

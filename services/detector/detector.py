@@ -47,7 +47,7 @@ class NoiseLevel:
     exponential average in log space), kept within ``LIMITS``.
     """
 
-    RATE = 0.05
+    RATE = 0.1
     LIMITS = (0.5, 4.0)
 
     def __init__(self) -> None:

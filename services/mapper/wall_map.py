@@ -25,6 +25,7 @@ from wallmap.services.mapper.wall_index import WallIndex
 Array = NDArray[np.float64]
 
 
+SHADOW_SAMPLES = 21  # points along a wall tested for a shadow
 NEAR_LINE = 1.0  # m: farther lines are never candidates for an observation
 
 
@@ -50,12 +51,20 @@ class MapperConfig:
         corner_reach: served ends of two confirmed walls that both lie this close (m) to where
             their lines cross meet there: each wall's extent overshoots a corner a little, where
             its detected lines took in points of the other wall.
+        corner_band: ...or within this (m) divided by the sine of the angle between them,
+            whichever is farther: a detected line takes in the other wall's points up to where
+            that wall leaves its inlier band, ``band / sin(angle)`` past a shallow corner
+            (0.15 m is the band of a Kinect-like camera at about 6 m).
+        corner_max_reach: the farthest an end moves to a corner (m).
         corner_angle: walls closer to parallel than this (rad) have no corner.
-        shadow_angle: a wall within this angle (rad)...
-        shadow_offset: ...and this distance (m) of a wall seen ``shadow_ratio`` times as often,
-            along more than half of its length, is a shadow of it: a line blended across a
-            shallow corner from far away. It is served as tentative.
+        shadow_angle: a wall that lies, along ``shadow_cover`` of its length, within
+            ``shadow_offset`` (m) of walls seen ``shadow_ratio`` times as often and at most this
+            angle (rad) from it is a shadow of them: a line blended across a shallow corner
+            from far away, lying on one wall or on both walls of the corner. It is served as
+            tentative.
+        shadow_offset: see above.
         shadow_ratio: see above.
+        shadow_cover: see above.
         min_length: a wall whose served segments add up to less than this (m) is served as
             tentative: the detector reports no shorter line, so such a wall is a sliver of one.
         confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
@@ -71,10 +80,13 @@ class MapperConfig:
     merge_angle: float = np.radians(3.0)
     merge_offset: float = 0.10
     corner_reach: float = 0.4
+    corner_band: float = 0.15
+    corner_max_reach: float = 0.6
     corner_angle: float = np.radians(3.0)
-    shadow_angle: float = np.radians(5.0)
+    shadow_angle: float = np.radians(15.0)
     shadow_offset: float = 0.10
-    shadow_ratio: float = 3.0
+    shadow_ratio: float = 2.0
+    shadow_cover: float = 0.7
     min_length: float = 0.25
     confirm_obs: int = 3
     confirm_views: int = 2
@@ -411,24 +423,36 @@ class WallMap:
         return wall.id
 
     def _shadowed(self, wall: Wall) -> bool:
-        """Whether a far better supported wall runs along most of this one (see MapperConfig)."""
+        """Whether far better supported walls run along most of this one (see MapperConfig).
+
+        The wall is sampled along its extent; a sample is covered where a better supported
+        wall within ``shadow_angle`` passes within ``shadow_offset`` of it, inside that
+        wall's extent. Two such walls can cover a line blended across the corner they make.
+        """
         cfg = self.config
-        n = wall.normal
-        length = float(np.ptp(wall.along(wall.ends)))
+        pieces = wall.segments()
+        (ax, ay), (bx, by) = pieces[0, 0].tolist(), pieces[-1, 1].tolist()
+        samples: Array | None = None
+        covered = np.zeros(SHADOW_SAMPLES, dtype=bool)
+        cos_max, offset = math.cos(cfg.shadow_angle), cfg.shadow_offset
         for other in (self.walls[i] for i in self.index.near(wall.ends)):
             if other is wall or other.n_obs < cfg.shadow_ratio * wall.n_obs:
                 continue
-            m = other.normal
-            if np.arccos(min(abs(float(n @ m)), 1.0)) > cfg.shadow_angle:
+            fx, fy, _, _, nx, ny = other.frame
+            if abs(wall.frame[4] * nx + wall.frame[5] * ny) < cos_max:
                 continue
-            mine, theirs = other.along(wall.ends), other.along(other.ends)
-            lo, hi = max(mine.min(), theirs.min()), min(mine.max(), theirs.max())
-            if hi - lo <= 0.5 * length:
+            # Both ends beyond the band on one side: no point between them is inside it.
+            da, db = (ax - fx) * nx + (ay - fy) * ny, (bx - fx) * nx + (by - fy) * ny
+            if min(da, db) > offset or max(da, db) < -offset:
                 continue
-            middle = other.on_line(np.array([0.5 * (lo + hi)]))[0]
-            if abs(float(n @ (middle - wall.foot))) <= cfg.shadow_offset:
-                return True
-        return False
+            if samples is None:
+                samples = np.linspace(pieces[0, 0], pieces[-1, 1], SHADOW_SAMPLES)
+            across = np.abs((samples - other.foot) @ other.normal)
+            along = other.along(samples)
+            theirs = other.segments()
+            low, high = other.along(theirs[0, 0]), other.along(theirs[-1, 1])
+            covered |= (across <= offset) & (along >= low - offset) & (along <= high + offset)
+        return float(covered.mean()) >= cfg.shadow_cover
 
     def served(self, wall: Wall) -> bool:
         """Confirmed and not a shadow of another wall: what a reply holds by default."""
@@ -466,7 +490,9 @@ class WallMap:
                 served[wall.id] = self.served(wall)
             return served[wall.id]
 
-        sin_min, reach = math.sin(self.config.corner_angle), self.config.corner_reach
+        cfg = self.config
+        sin_min, reach = math.sin(cfg.corner_angle), cfg.corner_reach
+        band, max_reach = cfg.corner_band, cfg.corner_max_reach
         out = {}
         for wall_id in ids:
             a = self.walls[wall_id]
@@ -486,8 +512,10 @@ class WallMap:
                 # Where the two lines cross (Cramer's rule on the 2x2 system of their normals).
                 cx = (a_offset * bny - any_ * b_offset) / det
                 cy = (anx * b_offset - bnx * a_offset) / det
-                end_a = _end_near(a_ends, cx, cy, reach)
-                if end_a is not None and _end_near(segments(b)[1], cx, cy, reach) is not None:
+                # The shallower the corner, the farther past it the inlier band reaches.
+                far = min(max_reach, max(reach, band / abs(det)))
+                end_a = _end_near(a_ends, cx, cy, far)
+                if end_a is not None and _end_near(segments(b)[1], cx, cy, far) is not None:
                     mine[(0, -1)[end_a], end_a] = (cx, cy)
         return out
 
