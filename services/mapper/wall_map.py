@@ -55,7 +55,8 @@ class MapperConfig:
             whichever is farther: a detected line takes in the other wall's points up to where
             that wall leaves its inlier band, ``band / sin(angle)`` past a shallow corner
             (0.15 m is the band of a Kinect-like camera at about 6 m).
-        corner_max_reach: the farthest an end moves to a corner (m).
+        corner_max_reach: the farthest an end moves to a corner (m): lines a few degrees apart
+            that cross mid-length are no corner, and are not cut there.
         corner_angle: walls closer to parallel than this (rad) have no corner.
         shadow_angle: a wall that lies, along ``shadow_cover`` of its length, within
             ``shadow_offset`` (m) of walls seen ``shadow_ratio`` times as often and at most this
