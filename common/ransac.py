@@ -183,6 +183,7 @@ def find_lines(
     """Sequential RANSAC over one cluster of finite points (N x 2)."""
     rejected: Counter[str] = Counter() if report is None else report.rejected
     lines: list[LineFit] = []
+    unsure: list[NDArray[np.intp]] = []  # pieces refused as unsure, for a second look
     remaining = np.arange(len(points))
     sigmas_all = point_sigmas(points, params)
     band_all = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas_all)
@@ -213,13 +214,40 @@ def find_lines(
                 rejected["shorter than min_length"] += 1
             elif seg_fit.angle_sd > _angle_sd_limit(seg_fit, len(seg) / len(points), params):
                 rejected["direction less sure than max_angle_sd"] += 1
+                unsure.append(remaining[idx])
             else:
                 lines.append(seg_fit)
             accepted.append(taken[seg])
         if not accepted:
             break
         remaining = np.delete(remaining, np.concatenate(accepted))
-    return lines
+    return lines + _joined(points, sigmas_all, unsure, params)
+
+
+def _joined(
+    points: Array, sigmas: Array, pieces: list[NDArray[np.intp]], params: RansacParams
+) -> list[LineFit]:
+    """Lines from pairs of unsure pieces that are neighbours along the scan and one wall.
+
+    At a corner the neighbour's line takes in the end of a wall, the kink test cuts that end
+    off, and what is left of the wall is another piece: each too short to be sure of, together
+    the wall. Two pieces join when no other point lies between them in the scan (whose order
+    runs along a wall), one line fits them without a kink, and its direction is sure enough.
+    """
+    out = []
+    ordered = sorted(pieces, key=lambda piece: int(piece.min()))
+    joined = None  # the piece last joined: it is not joined twice
+    for a, b in itertools.pairwise(ordered):
+        if a is joined or b.min() > a.max() + 1:
+            continue
+        both = np.sort(np.concatenate([a, b]))
+        if bend_split(points[both], sigmas[both], params.min_points, params.split_f) is not None:
+            continue
+        fit = fit_line(points[both], sigmas[both], cov_scale=params.cov_scale)
+        if fit.angle_sd <= params.max_angle_sd and fit.length >= params.min_length:
+            out.append(fit)
+            joined = b
+    return out
 
 
 def _angle_sd_limit(fit: LineFit, share: float, params: RansacParams) -> float:

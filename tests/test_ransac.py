@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.line_fit import fit_line, line_through
-from wallmap.common.ransac import RansacParams, detect_lines, split_at_nans
+from wallmap.common.ransac import RansacParams, RowReport, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
 
 
@@ -144,3 +144,23 @@ def test_the_same_glimpse_beside_another_wall_is_refused_as_unsure():
     assert far[0].angle_sd > RansacParams().max_angle_sd  # ...but unsure...
     assert not [line for line in lines if line.offset > 4.5 and abs(line.normal[1]) > 0.99]
     assert len(lines) == 1  # ...so only the near wall is kept
+
+
+def test_a_wall_split_at_its_neighbours_corner_is_joined_again():
+    # A 0.8 m wall at 3 m meeting a long one at 29 degrees, with twice a Kinect's noise: the long
+    # line's inlier band takes the end of the short wall, the kink test cuts it off, and both
+    # pieces of the short wall are too short to be sure of on their own.
+    rng = np.random.default_rng(4)
+    p0, corner, p2 = np.array([2.65, 1.38]), np.array([3.32, 0.95]), np.array([4.7, -1.6])
+    short = p0 + np.outer(np.linspace(0, 1, 36, endpoint=False), corner - p0)
+    long = corner + np.outer(np.linspace(0, 1, 95), p2 - corner)
+    scan = np.vstack([short, long])
+    ranges = np.linalg.norm(scan, axis=1)
+    scan += scan / ranges[:, None] * rng.normal(0, 2 * 1.425e-3 * ranges**2)[:, None]
+    report = RowReport()
+    lines = detect_lines(scan, RansacParams(noise_scale=1.5), np.random.default_rng(0), report)
+    assert report.rejected["direction less sure than max_angle_sd"] >= 2  # two unsure pieces...
+    angles = sorted(np.degrees(np.arctan2(-line.normal[0], line.normal[1])) for line in lines)
+    assert len(lines) == 2  # ...joined into the short wall
+    assert angles[1] == pytest.approx(-32.7, abs=2.0)
+    assert angles[0] == pytest.approx(-61.6, abs=1.0)
