@@ -7,6 +7,7 @@ integrate every frame.
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -54,9 +55,10 @@ def map_with(stack, bag: Path, *player_args: str, mapper_args: tuple[str, ...] =
     return stack.query("--min-obs", "3")
 
 
-def score_of(reply: dict, scene) -> MapScore:
+def score_of(reply: dict, scene, skipped: int = 0) -> MapScore:
+    """The map's score; every frame integrated but the ``skipped`` ones the detector counted."""
     info, _ = scene
-    assert reply["frames"] == info.n_frames
+    assert reply["frames"] + skipped == info.n_frames
     assert reply["dropped"] == 0
     score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
     print(score.summary())
@@ -119,7 +121,13 @@ def test_outside_publisher_over_zenoh_at_4x(stack, scene, reference):
     assert played.returncode == 0, played.stderr
     assert publisher.wait(timeout=60) == 0
     assert f"published {len(info.trajectory)} poses" in publisher.stdout.read()
-    assert_same_map(score_of(stack.query("--min-obs", "3"), scene), reference)
+    # Real-time playback: a detector that falls behind on a busy machine skips to the newest
+    # frame and counts the skipped ones (--fast would lose none); none may go uncounted.
+    status = json.loads(stack.run("status", "--json", *stack.zenoh_args, timeout=30).stdout)
+    detector = next(s["counters"] for s in status if s["service"] == "detector")
+    skipped = detector.get("dropped", 0)
+    assert skipped <= 0.05 * info.n_frames
+    assert_same_map(score_of(stack.query("--min-obs", "3"), scene, skipped), reference)
 
 
 def publish_cdr(stack, key: str, payloads: list[bytes]) -> None:
