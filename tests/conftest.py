@@ -100,6 +100,25 @@ class Stack:
         assert out.returncode == 0, out.stderr
         return json.loads(out.stdout)
 
+    def counters(self, service: str) -> dict:
+        """A running service's counters, as `wallmap status --json` reads them."""
+        out = self.run("status", "--json", *self.zenoh_args, timeout=30)
+        assert out.returncode == 0, out.stderr
+        return next(s["counters"] for s in json.loads(out.stdout) if s["service"] == service)
+
+    def settled_frames(self, n_frames: int, *query: str) -> tuple[dict, int]:
+        """The map once every frame is integrated or counted as skipped by the detector.
+
+        In real-time playback a detector that falls behind (a busy machine) skips to the newest
+        frame and counts what it skipped; --fast loses none. Returns the reply and the skips.
+        """
+        deadline = time.monotonic() + 10
+        while True:
+            skipped = self.counters("detector").get("dropped", 0)
+            reply = self.query(*query)
+            if reply["frames"] + skipped >= n_frames or time.monotonic() > deadline:
+                return reply, skipped
+
     def stop_all(self) -> None:
         for service in reversed(self.services):
             service.stop()
