@@ -3,15 +3,13 @@ plus the pose-source specs, pose tracks and TUM files it relies on."""
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from rosbags.rosbag1 import Writer as Writer1
+from bag_records import Record, write_records
 from rosbags.rosbag2 import StoragePlugin
-from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -164,35 +162,12 @@ class Msgs:
         )
 
 
-@dataclass
-class Record:
-    topic: str
-    msgtype: str
-    msg: Any
-    receive: float  # seconds
-
-
 def write_bag(
     path: Path, msgs: Msgs, records: list[Record], plugin: StoragePlugin | None = None
 ) -> Path:
     """Write records (in the given order) to a ROS 1 bag, or a ROS 2 bag with ``plugin``."""
-    if msgs.ros1:
-        writer: Writer1 | Writer2 = Writer1(path)
-        serialize = msgs.store.serialize_ros1
-    else:
-        assert plugin is not None
-        writer = Writer2(path, version=9, storage_plugin=plugin)
-        serialize = msgs.store.serialize_cdr
-    connections: dict[str, Any] = {}
-    with writer:
-        for record in records:
-            if record.topic not in connections:
-                connections[record.topic] = writer.add_connection(
-                    record.topic, record.msgtype, typestore=msgs.store
-                )
-            data = serialize(record.msg, record.msgtype)
-            writer.write(connections[record.topic], int(record.receive * 1e9), data)
-    return path
+    assert msgs.ros1 == (plugin is None)
+    return write_records(path, msgs.store, records, plugin)
 
 
 MOUNT = ((0.3, 0.0, 0.5), yaw_quaternion(0.0))  # base_link -> camera_link

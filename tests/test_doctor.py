@@ -4,14 +4,13 @@ gap, clock jumps, several sensors or damage: the account must match the bag and 
 import argparse
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from bag_records import Record, write_records
 from conftest import REAL_DATA
-from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.cli import main as wallmap_main
@@ -130,26 +129,9 @@ def odometry(stamp: float, child: str = "base_link") -> Any:
     )
 
 
-@dataclass
-class Record:
-    topic: str
-    msgtype: str
-    msg: Any
-    receive: float  # seconds
-
-
 def write_bag(path: Path, records: list[Record]) -> Path:
     """A ROS 1 bag of the records, in receive-time order."""
-    connections: dict[str, Any] = {}
-    with Writer(path) as writer:
-        for record in sorted(records, key=lambda r: r.receive):
-            if record.topic not in connections:
-                connections[record.topic] = writer.add_connection(
-                    record.topic, record.msgtype, typestore=STORE
-                )
-            data = STORE.serialize_ros1(record.msg, record.msgtype)
-            writer.write(connections[record.topic], int(record.receive * 1e9), data)
-    return path
+    return write_records(path, STORE, sorted(records, key=lambda r: r.receive))
 
 
 SCAN, TF, ODOM = "sensor_msgs/msg/LaserScan", "tf2_msgs/msg/TFMessage", "nav_msgs/msg/Odometry"
