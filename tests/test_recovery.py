@@ -6,7 +6,6 @@ acknowledgements stall, the player sends the frames again from the first one not
 
 from __future__ import annotations
 
-import json
 import math
 import signal
 import time
@@ -192,10 +191,6 @@ def test_a_slow_detector_drops_the_oldest_real_time_frames_and_never_fast_ones(s
     points = (wall + rng.normal(0, 0.003, wall.shape)).astype(np.float32)[None]
     settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
 
-    def counters() -> dict:
-        out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
-        return next(s["counters"] for s in json.loads(out.stdout) if s["service"] == "detector")
-
     with open_session(settings) as session:
         block = zenoh.CongestionControl.BLOCK
         frames = session.declare_publisher(keys.frames, congestion_control=block)
@@ -205,7 +200,7 @@ def test_a_slow_detector_drops_the_oldest_real_time_frames_and_never_fast_ones(s
                 frame = Frame(run, seq, 1.0 + seq, "cam", points, np.eye(4), "depth", resends)
                 frames.put(pack(frame))
             time.sleep(2.0)
-            seen = counters()
+            seen = stack.counters("detector")
             if resends:
                 assert seen["received"] == seen["published"] == 400
                 assert "dropped" not in seen
