@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import logging
 import os
 import signal
@@ -52,10 +53,10 @@ class Stats:
         self.add("refused")
         self.note(f"refused.{what}", reason, f"refused {what}: {reason}")
 
-    def note(self, name: str, kind: str, message: str) -> None:
-        """Count an event and log it, at most once a second for each ``kind``."""
+    def note(self, name: str, kind: str, message: str, n: int = 1) -> None:
+        """Count ``n`` events and log them, at most once a second for each ``kind``."""
         with self._lock:
-            self._counts[name] += 1
+            self._counts[name] += n
             now = time.monotonic()
             quiet = now - self._last_logged.get(kind, -1e9) < 1.0
             if not quiet:
@@ -86,25 +87,40 @@ def received_frames(channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats)
             yield frame
 
 
-def newest_frame(
-    channel: zenoh.handlers.Handler[zenoh.Sample], frame: Frame, stats: Stats
-) -> Frame:
-    """In real-time playback, the newest frame waiting instead of ``frame``; the older are dropped.
+BEHIND = 15  # real-time frames waiting (half a second of a 30 Hz camera) before skipping
 
-    A service slower than the bag must not fall further and further behind: it skips to the
-    newest frame, counts what it skipped and says so. Frames of a player that sends again
-    (``--fast``) are never dropped: that player waits for the pipeline instead.
+
+def frames_in_turn(
+    channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats, behind: int = BEHIND
+) -> Iterator[Frame]:
+    """The frames to process, in order; in real-time playback, skipping when truly behind.
+
+    A service slower than the bag must not fall further and further behind: when more than
+    ``behind`` real-time frames wait, it skips to the newest, counts what it skipped and says
+    so. A short burst (a busy moment on a shared machine) is worked off in order instead. The
+    channel is emptied each turn, so it never fills and never stalls the session. Frames of a
+    player that sends again (``--fast``) are never dropped and not read ahead: that player
+    waits for the pipeline, and the channel's back-pressure is what makes it wait.
     """
-    while not frame.resends and (sample := channel.try_recv()) is not None:
-        if (newer := _frame_of(sample, stats)) is None:
-            continue
-        stats.note(
-            "dropped",
-            "behind",
-            "dropping the oldest frames: slower than real-time playback (--fast loses none)",
-        )
-        frame = newer
-    return frame
+    waiting: collections.deque[Frame] = collections.deque()
+    for first in received_frames(channel, stats):
+        waiting.append(first)
+        while waiting:
+            while not waiting[-1].resends and (sample := channel.try_recv()) is not None:
+                if (frame := _frame_of(sample, stats)) is not None:
+                    waiting.append(frame)
+            live = [frame for frame in waiting if not frame.resends]
+            if len(live) > behind:
+                newest = live[-1]
+                waiting = collections.deque(f for f in waiting if f.resends or f is newest)
+                stats.note(
+                    "dropped",
+                    "behind",
+                    f"skipped {len(live) - 1} frames: slower than real-time playback "
+                    "(--fast loses none)",
+                    n=len(live) - 1,
+                )
+            yield waiting.popleft()
 
 
 class Presence:

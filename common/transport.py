@@ -10,9 +10,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import re
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +25,10 @@ import zenoh
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_PREFIX = "wallmap"
+# How often a client tries its router again once the link is lost. Zenoh's default starts at
+# 1 s and doubles to 4 s, which adds up to 4 s of loss after the router is back; a connect
+# attempt to a loopback or LAN router costs next to nothing.
+RECONNECT = "{period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2}"
 
 
 class TransportError(RuntimeError):
@@ -108,12 +117,16 @@ def make_config(
         except zenoh.ZError as err:
             msg = f"zenoh config {settings.config_file} is invalid: {zenoh_reason(err)}"
             raise TransportError(msg) from err
+        text = settings.config_file.read_text(encoding="utf-8")
         # Zenoh's default turns multicast on: keep it off unless the file speaks of it.
-        if "multicast" not in settings.config_file.read_text(encoding="utf-8"):
+        if "multicast" not in text:
             conf.insert_json5("scouting/multicast/enabled", "false")
+        if "retry" not in text:
+            conf.insert_json5("connect/retry", RECONNECT)
     else:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("connect/retry", RECONNECT)
     conf.insert_json5("mode", json.dumps(mode))
     if mode == "router":
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
@@ -126,18 +139,97 @@ def make_config(
     return conf
 
 
+@contextmanager
 def open_session(
-    settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
-) -> zenoh.Session:
-    """Open a session, turning Zenoh's errors into one readable line."""
+    settings: ZenohSettings,
+    *,
+    mode: str = "client",
+    listen: tuple[str, ...] = (),
+    count: Callable[[str], None] | None = None,
+) -> Iterator[zenoh.Session]:
+    """A session for the ``with`` block, Zenoh's errors turned into one readable line.
+
+    A client's link to its router is watched (see ``RouterWatch``); ``count`` is told of each
+    loss and recovery (``router_lost``, ``router_back``), for the service's counters.
+    """
     conf = make_config(settings, mode=mode, listen=listen)
     try:
-        return zenoh.open(conf)
+        session = zenoh.open(conf)
     except zenoh.ZError as err:
         where = ", ".join(listen if mode == "router" else settings.connect)
         verb = "listen on" if mode == "router" else "reach a Zenoh router at"
         msg = f"cannot {verb} {where} ({zenoh_reason(err)})"
         raise TransportError(msg) from err
+    watch = RouterWatch(session, settings.connect, count) if mode != "router" else None
+    try:
+        yield session
+    finally:
+        if watch is not None:
+            watch.close()
+        _close(session)
+
+
+def _close(session: zenoh.Session) -> None:
+    """Close a session; a close that fails is one line (the work is done by then)."""
+    try:
+        session.close()
+    except zenoh.ZError as err:
+        msg = f"the Zenoh session did not close cleanly ({zenoh_reason(err)})"
+        raise TransportError(msg) from err
+
+
+class RouterWatch:
+    """Says when a client loses its router and when it is back, once each, with how long.
+
+    Zenoh reconnects by itself and declares the session's subscribers, queryables, publishers
+    and liveliness tokens again on the new link; what was sent while the link was down is lost
+    (nothing raises), so the outage must at least be visible in the logs and the counters.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        endpoints: tuple[str, ...],
+        count: Callable[[str], None] | None = None,
+    ) -> None:
+        self._log = logging.getLogger("wallmap.link")
+        self._where = ", ".join(endpoints)
+        self._count = count
+        self._lock = threading.Lock()
+        self._routers: set[str] = {str(zid) for zid in session.info.routers_zid()}
+        self._lost_at: float | None = None
+        # A callback, not a channel: two set operations and a log line, never blocking.
+        self._listener = session.info.declare_transport_events_listener(self._on_event)
+
+    def _on_event(self, event: zenoh.TransportEvent) -> None:
+        if event.transport.whatami != zenoh.WhatAmI.ROUTER:
+            return
+        zid = str(event.transport.zid)
+        with self._lock:
+            if event.kind == zenoh.SampleKind.PUT:
+                self._routers.add(zid)
+                lost_at, self._lost_at = self._lost_at, None
+                if lost_at is None:
+                    return
+                outage = time.monotonic() - lost_at
+                self._log.warning("reconnected to the Zenoh router after %.1f s", outage)
+                event_name = "router_back"
+            else:
+                self._routers.discard(zid)
+                if self._routers or self._lost_at is not None:
+                    return
+                self._lost_at = time.monotonic()
+                self._log.warning(
+                    "lost the Zenoh router at %s; reconnecting (what is sent meanwhile is lost)",
+                    self._where,
+                )
+                event_name = "router_lost"
+        if self._count is not None:
+            self._count(event_name)
+
+    def close(self) -> None:
+        """Stop watching (before the session closes, which ends every link)."""
+        self._listener.undeclare()
 
 
 @dataclass(frozen=True)

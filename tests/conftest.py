@@ -1,9 +1,16 @@
-"""Shared fixtures: a real Zenoh router on a free loopback port, services as real processes."""
+"""Shared fixtures: a real Zenoh router on a free loopback port, services as real processes.
+
+Every process a test runs through these helpers is checked the same way: its exit status (0
+unless the test says otherwise, or killed it on purpose) and that nothing it printed is a Python
+traceback or a Rust panic. A good run that ends in a traceback is a failure.
+"""
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import signal
 import socket
 import subprocess
 import sys
@@ -33,9 +40,41 @@ def wait_for_port(port: int, timeout: float = 20.0) -> None:
     raise TimeoutError(f"nothing listens on port {port}")
 
 
-def run_wallmap(*args: str, timeout: float = 120.0, **kwargs) -> subprocess.CompletedProcess[str]:
-    """Run one wallmap command to its end, capturing its output as text."""
-    return subprocess.run(
+CRASH_MARKS = ("Traceback (most recent call last)", "panicked at")
+ZENOH_ERROR = re.compile(r"ERROR.*zenoh")  # Zenoh's own log: e.g. a channel closed under it
+
+
+def crash_in(output: str, *, zenoh_errors: bool = False) -> str | None:
+    """The first line that says a process crashed (a traceback, a panic, a Zenoh error)."""
+    for line in output.splitlines():
+        if any(mark in line for mark in CRASH_MARKS):
+            return line
+        if not zenoh_errors and ZENOH_ERROR.search(line):
+            return line
+    return None
+
+
+def assert_clean_exit(
+    name: str, code: int | None, output: str, expect: int | None = 0, *, zenoh_errors: bool = False
+) -> None:
+    """``name`` ended with status ``expect`` (None: any) and printed no traceback or panic.
+
+    ``zenoh_errors``: Zenoh's own error lines are expected (a router that refuses on purpose).
+    """
+    crash = crash_in(output, zenoh_errors=zenoh_errors)
+    assert crash is None, f"{name} crashed ({crash}):\n{output[-4000:]}"
+    if expect is not None:
+        assert code == expect, f"{name} exited {code}, not {expect}:\n{output[-4000:]}"
+
+
+def run_wallmap(
+    *args: str, timeout: float = 120.0, expect: int | None = 0, **kwargs
+) -> subprocess.CompletedProcess[str]:
+    """Run one wallmap command to its end, capturing its output as text.
+
+    Asserts it exited with ``expect`` (None: any status) and printed no traceback.
+    """
+    done = subprocess.run(
         [sys.executable, "-m", "wallmap", *args],
         capture_output=True,
         text=True,
@@ -43,6 +82,8 @@ def run_wallmap(*args: str, timeout: float = 120.0, **kwargs) -> subprocess.Comp
         check=False,
         **kwargs,
     )
+    assert_clean_exit(f"wallmap {args[0]}", done.returncode, done.stdout + done.stderr, expect)
+    return done
 
 
 @dataclass
@@ -52,19 +93,35 @@ class Service:
     name: str
     proc: subprocess.Popen[bytes]
     log: Path
+    killed: bool = False  # SIGKILLed by the test: its exit status is not its own
+    zenoh_errors: bool = False  # Zenoh logs errors on purpose (an access-control router)
 
     def output(self) -> str:
         return self.log.read_text(errors="replace")
 
-    def stop(self, timeout: float = 15.0) -> int:
+    def stop(self, timeout: float = 15.0, sig: int = signal.SIGTERM) -> int:
+        """Ask it to stop (SIGTERM, or ``sig``) and wait; a service that hangs is killed."""
         if self.proc.poll() is None:
-            self.proc.terminate()
+            self.proc.send_signal(sig)
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
         return self.proc.returncode
+
+    def kill(self) -> None:
+        """SIGKILL, as a crash or a power cut would."""
+        self.killed = True
+        self.proc.kill()
+        self.proc.wait()
+
+    def assert_clean(self) -> None:
+        """It ended with status 0 (unless killed on purpose) and printed no traceback."""
+        expect = None if self.killed else 0
+        assert_clean_exit(
+            self.name, self.proc.returncode, self.output(), expect, zenoh_errors=self.zenoh_errors
+        )
 
 
 class Stack:
@@ -92,8 +149,10 @@ class Stack:
         self.services.append(service)
         return service
 
-    def run(self, *args: str, timeout: float = 300.0) -> subprocess.CompletedProcess[str]:
-        return run_wallmap(*args, timeout=timeout)
+    def run(
+        self, *args: str, timeout: float = 300.0, expect: int | None = 0
+    ) -> subprocess.CompletedProcess[str]:
+        return run_wallmap(*args, timeout=timeout, expect=expect)
 
     def query(self, *extra: str) -> dict:
         out = self.run("query", "--json", *extra, *self.zenoh_args, timeout=30)
@@ -123,6 +182,11 @@ class Stack:
         for service in reversed(self.services):
             service.stop()
 
+    def assert_all_clean(self) -> None:
+        """Every process of the stack exited 0 (or was killed by the test), with no traceback."""
+        for service in self.services:
+            service.assert_clean()
+
 
 @pytest.fixture
 def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
@@ -136,8 +200,4 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
         yield s
     finally:
         s.stop_all()
-        for service in s.services:
-            if service.proc.returncode not in (0, -15):
-                print(
-                    f"--- {service.name} (exit {service.proc.returncode}) ---\n{service.output()}"
-                )
+    s.assert_all_clean()

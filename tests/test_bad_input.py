@@ -68,7 +68,9 @@ def test_malformed_messages_are_refused_counted_and_the_services_keep_working(st
 
 
 def test_missing_bag_is_one_line(tmp_path):
-    out = run_wallmap("player", str(tmp_path / "nope.bag"), "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap(
+        "player", str(tmp_path / "nope.bag"), "--connect", "tcp/127.0.0.1:1", expect=1
+    )
     assert_one_line_error(out, "player", "nope.bag")
 
 
@@ -79,7 +81,9 @@ def test_bag_without_a_usable_sensor_topic_is_one_line(tmp_path):
         conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
         msg = store.types["std_msgs/msg/String"](data="hello")
         writer.write(conn, 1_000_000_000, store.serialize_ros1(msg, "std_msgs/msg/String"))
-    out = run_wallmap("player", str(bag), "--pose-source", "none", "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap(
+        "player", str(bag), "--pose-source", "none", "--connect", "tcp/127.0.0.1:1", expect=1
+    )
     assert_one_line_error(out, "player", "/chatter")
 
 
@@ -87,7 +91,7 @@ def test_corrupt_bag_is_one_line(tmp_path):
     bag = tmp_path / "cut.bag"
     write_scene_bag(bag, seed=5, n_frames=5, fmt="ros1", sensor="depth16")
     bag.write_bytes(bag.read_bytes()[:5000])
-    out = run_wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1")
+    out = run_wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1", expect=1)
     assert_one_line_error(out, "player", "cut.bag")
 
 
@@ -106,20 +110,20 @@ def test_corrupt_bag_is_one_line(tmp_path):
     ],
 )
 def test_bad_flags_are_one_line(args, words):
-    out = run_wallmap(*args)
+    out = run_wallmap(*args, expect=None)  # 2 from argparse, 1 from a later check
     assert_one_line_error(out, args[0], *words)
 
 
 def test_no_router_is_one_line():
     port = free_port()
-    out = run_wallmap("query", "--connect", f"tcp/127.0.0.1:{port}")
+    out = run_wallmap("query", "--connect", f"tcp/127.0.0.1:{port}", expect=1)
     assert_one_line_error(out, "query", f"tcp/127.0.0.1:{port}")
 
 
 def test_bad_zenoh_config_is_one_line(tmp_path):
     config = tmp_path / "z.json5"
     config.write_text("{ mode: 'client', connect: { endpoints: [ } ")
-    out = run_wallmap("query", "--zenoh-config", str(config))
+    out = run_wallmap("query", "--zenoh-config", str(config), expect=1)
     assert_one_line_error(out, "query", "z.json5")
-    out = run_wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")))
+    out = run_wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")), expect=1)
     assert_one_line_error(out, "query", "does not exist")

@@ -219,4 +219,4 @@ def test_frames_without_a_pose_are_dropped_counted_and_visible(stack, scene):
                      mapper_args=("--pose-wait", "0.2"))  # fmt: skip
     assert reply["frames"] == 0
     assert reply["dropped"] == N_FRAMES
-    assert reply["dropped_reasons"] == {"pose_timeout": N_FRAMES, "no_pose": 0}
+    assert reply["dropped_reasons"] == {"pose_timeout": N_FRAMES, "no_pose": 0, "backlog": 0}

@@ -7,7 +7,6 @@ acknowledgements stall, the player sends the frames again from the first one not
 from __future__ import annotations
 
 import math
-import signal
 import time
 from dataclasses import replace
 
@@ -105,8 +104,7 @@ def test_detector_killed_mid_bag_loses_no_frame(stack, scene, reference) -> None
     detector = stack.start("detector", "detector", *stack.zenoh_args)
 
     def kill_and_restart() -> None:
-        detector.proc.send_signal(signal.SIGKILL)
-        detector.proc.wait()
+        detector.kill()
         stack.start("detector-2", "detector", *stack.zenoh_args)
 
     reply, _ = _play_with_a_fault(stack, scene, kill_and_restart, loses_frames=True)
@@ -172,8 +170,7 @@ def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_pat
 
     def kill_and_restart() -> None:
         time.sleep(3.0)  # the mapper saves its state every 2 s
-        mapper.proc.send_signal(signal.SIGKILL)
-        mapper.proc.wait()
+        mapper.kill()
         assert state.exists()
         stack.start("mapper-3", "mapper", "--state", str(state), *stack.zenoh_args)
 

@@ -13,6 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
+import zenoh
+
 from wallmap import __version__
 from wallmap.arg_types import non_negative, positive
 from wallmap.common.ransac import RansacParams
@@ -28,11 +30,12 @@ from wallmap.common.transport import (
     key_expression,
     open_session,
     settings_from_args,
+    zenoh_reason,
 )
 from wallmap.doctor import add_command as add_doctor_command
 from wallmap.export import write_geojson
 from wallmap.foxglove_cli import add_commands as add_foxglove_commands
-from wallmap.launcher import UpOptions, demo, up
+from wallmap.launcher import LaunchError, UpOptions, demo, up
 from wallmap.map_client import QueryError, fetch_map, format_table, to_json
 from wallmap.plot import write_picture
 from wallmap.services.detector import service as detector_service
@@ -49,7 +52,9 @@ from wallmap.status import fetch_status, format_status
 from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
 
-FAILURES = (TransportError, PlayerError, TfError, StateError, QueryError, OSError, ValueError)
+FAILURES = (
+    TransportError, PlayerError, TfError, StateError, QueryError, LaunchError, OSError, ValueError,
+)  # fmt: skip
 
 
 class _Parser(argparse.ArgumentParser):
@@ -442,6 +447,9 @@ def main(argv: list[str] | None = None) -> int:
         return func(args)
     except FAILURES as err:
         print(f"wallmap {args.command}: error: {err}", file=sys.stderr)
+        return 1
+    except zenoh.ZError as err:  # one Zenoh did not foresee here either: still one line
+        print(f"wallmap {args.command}: error: zenoh: {zenoh_reason(err)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130

@@ -58,14 +58,37 @@ def _wallmap(*args: str) -> list[str]:
     return [sys.executable, "-m", "wallmap", *args]
 
 
-@contextlib.contextmanager
-def _processes() -> Iterator[list[subprocess.Popen[bytes]]]:
-    """Started processes, stopped in reverse order (SIGTERM, then SIGKILL) on the way out."""
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        yield procs
-    finally:
-        for proc in reversed(procs):
+class LaunchError(RuntimeError):
+    """A service of ``wallmap up`` failed; the message names it and its exit status."""
+
+
+class _Services:
+    """The started processes by name; stopped in reverse order, SIGTERM then SIGKILL.
+
+    Their logs go to this terminal. A service that exits while the bag plays, or that does not
+    exit cleanly when stopped, is a failure of ``up`` with its name and status.
+    """
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self._env = env
+        self._procs: list[tuple[str, subprocess.Popen[bytes]]] = []
+
+    def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(_wallmap(*args), env=self._env)
+        self._procs.append((name, proc))
+        return proc
+
+    def check_running(self) -> None:
+        """Raises LaunchError if a service (not the player, which ends) has exited."""
+        for name, proc in self._procs:
+            if name != "player" and proc.poll() is not None:
+                msg = f"the {name} exited with status {proc.returncode} while the bag played"
+                raise LaunchError(msg)
+
+    def stop(self) -> None:
+        """Stop them all; raises LaunchError naming those that did not exit with status 0."""
+        failed = []
+        for name, proc in reversed(self._procs):
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
                 try:
@@ -73,6 +96,24 @@ def _processes() -> Iterator[list[subprocess.Popen[bytes]]]:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
+                    failed.append(f"the {name} did not stop within {STOP_TIMEOUT:.0f} s")
+                    continue
+            if proc.returncode != 0:
+                failed.append(f"the {name} exited with status {proc.returncode}")
+        if failed:
+            raise LaunchError("; ".join(failed))
+
+
+@contextlib.contextmanager
+def _processes(env: dict[str, str]) -> Iterator[_Services]:
+    services = _Services(env)
+    try:
+        yield services
+    except BaseException:
+        with contextlib.suppress(LaunchError):  # the first failure is the one to tell
+            services.stop()
+        raise
+    services.stop()
 
 
 def up(settings: ZenohSettings, options: UpOptions) -> int:
@@ -91,19 +132,18 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
     if options.sensor_topic:
         player_args += ["--sensor-topic", options.sensor_topic]
     stop = stop_on_signals()
-    with _processes() as procs:
-        router_args = ["router", "--listen", endpoint, "--prefix", settings.prefix]
-        procs.append(subprocess.Popen(_wallmap(*router_args), env=env))
-        procs.append(subprocess.Popen(_wallmap(*mapper_args), env=env))
-        procs.append(subprocess.Popen(_wallmap("detector", *common), env=env))
+    with _processes(env) as procs:
+        procs.start("router", "router", "--listen", endpoint, "--prefix", settings.prefix)
+        procs.start("mapper", *mapper_args)
+        procs.start("detector", "detector", *common)
         if options.odometry:
-            procs.append(subprocess.Popen(_wallmap("odometry", *common), env=env))
-        player = subprocess.Popen(_wallmap(*player_args), env=env)
-        procs.append(player)
+            procs.start("odometry", "odometry", *common)
+        player = procs.start("player", *player_args)
         while player.poll() is None and not stop.is_set():
+            procs.check_running()
             stop.wait(0.1)
         if stop.is_set():
-            return 130
+            return 0  # asked to stop (Ctrl-C, SIGTERM): the services stop cleanly
         if player.returncode != 0:
             return player.returncode
         with open_session(settings) as session:

@@ -1,8 +1,10 @@
 """The detector service: sensor frames in over Zenoh, wall observations out.
 
-Frames arrive through a bounded FIFO channel that the service's own thread drains; when the
-detector falls behind, the channel fills and Zenoh pushes back on the publisher (the observations
-are sent with congestion control BLOCK), so under ``wallmap player --fast`` no frame is lost.
+Frames arrive through a bounded FIFO channel that the service's own thread drains. Under
+``wallmap player --fast``, when the detector falls behind, the channel fills and Zenoh pushes back
+on the publisher (the observations are sent with congestion control BLOCK), so no frame is lost;
+in real-time playback it works off short bursts in order and skips to the newest frame only when
+truly behind (``frames_in_turn``).
 """
 
 from __future__ import annotations
@@ -19,8 +21,7 @@ from wallmap.common.runtime import (
     Presence,
     Stats,
     drain,
-    newest_frame,
-    received_frames,
+    frames_in_turn,
     setup_logging,
 )
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -37,7 +38,7 @@ def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) 
     stats = Stats(log)
     detector = WallDetector(config)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings) as session:
+    with open_session(settings, count=stats.add) as session:
         publisher = session.declare_publisher(
             keys.observations, congestion_control=zenoh.CongestionControl.BLOCK
         )
@@ -87,8 +88,7 @@ def _work(
     Each frame's diagnostics (points, clusters, lines, what was turned down and why) go out on
     their own key; Zenoh sends nothing when nobody listens.
     """
-    for received in received_frames(channel, stats):
-        frame = newest_frame(channel, received, stats)
+    for frame in frames_in_turn(channel, stats):
         report = RowReport()
         observations = detector.detect(frame, report)
         publisher.put(pack(observations))

@@ -36,6 +36,7 @@ MAX_RUNS = 16
 ACK_EVERY = 8  # frames between acknowledgements while busy
 UPDATE_PERIOD = 0.5  # s between map updates while busy
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
+BACKLOG = "backlog"  # dropped because MAX_PENDING newer frames wait for poses too
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,8 @@ class MapperCore:
         extra: dict[str, object] = {
             "dropped": counts.get("dropped", 0),
             "dropped_reasons": {
-                reason: counts.get(f"dropped.{reason}", 0) for reason in DROP_REASONS.values()
+                reason: counts.get(f"dropped.{reason}", 0)
+                for reason in (*DROP_REASONS.values(), BACKLOG)
             },
             "refused": counts.get("refused", 0),
         }
@@ -137,7 +139,7 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings) as session:
+    with open_session(settings, count=stats.add) as session:
         progress = session.declare_publisher(keys.progress)
         updates = session.declare_publisher(keys.map_updates)
         pose_sub = session.declare_subscriber(pose_key, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
@@ -234,38 +236,24 @@ def _observations(
     pose_wait: float,
 ) -> None:
     """Fold observations into the map in arrival order, each once its pose is known."""
-    pending: collections.deque[tuple[float, Observations]] = collections.deque()
-    with core.lock:  # runs restored from the state file: say where they stand, first thing
-        acks: dict[str, Progress] = dict(core.runs)  # the latest progress, not yet published
-        order = _InOrder(core.runs.values())
+    waiting = _Waiting(core, pose_wait)
     unacked = 0  # frames processed since the last acknowledgement
     while True:
         try:
-            if not pending:
-                _flush(acks, progress)  # idle: tell the players where we are
+            if not waiting.pending:
+                _flush(waiting.acks, progress)  # idle: tell the players where we are
                 unacked = 0
-                sample = channel.recv()
-            else:
-                sample = channel.try_recv() if len(pending) < MAX_PENDING else None
+                waiting.add(channel.recv())
+            # Everything that has arrived, before any wait for a pose: a full channel would
+            # stall the session's receiving thread, and with it the poses these observations
+            # wait for and every map query.
+            while (sample := channel.try_recv()) is not None:
+                waiting.add(sample)
         except zenoh.ZError:
             return
-        if sample is not None:
-            try:
-                observations = unpack_observations(sample.payload.to_bytes())
-            except MessageError as err:
-                core.stats.refuse("observations", str(err))
-            else:
-                skipped = order.take(
-                    observations.run, observations.seq, resends=observations.resends
-                )
-                if skipped is None:
-                    pending.append((time.monotonic(), observations))
-                else:
-                    core.stats.add(skipped)
-        while pending and _process_head(pending, core, pose_wait, acks):
-            unacked += 1
+        unacked += waiting.process()
         if unacked >= ACK_EVERY:
-            _flush(acks, progress)
+            _flush(waiting.acks, progress)
             unacked = 0
 
 
@@ -285,41 +273,79 @@ def _updates(core: MapperCore, updates: zenoh.Publisher, stop: threading.Event) 
         updates.put(encode(changes))
 
 
-def _process_head(
-    pending: collections.deque[tuple[float, Observations]],
-    core: MapperCore,
-    pose_wait: float,
-    acks: dict[str, Progress],
-) -> bool:
-    """Integrate or drop the oldest pending observation; False when it must wait longer."""
-    arrived, obs = pending[0]
-    with core.lock:
-        pose = core.poses.lookup(obs.stamp)
-        if pose is Lookup.WAIT and time.monotonic() - arrived < pose_wait:
-            core.lock.wait(timeout=0.05)
-            return False
-        pending.popleft()
-        integrated = not isinstance(pose, Lookup)
+class _Waiting:
+    """Observations waiting for their poses, in arrival order, and the runs' progress.
+
+    At most MAX_PENDING wait: when poses are that far behind, the oldest gives way (dropped and
+    counted), so the mapper never stops reading its channel.
+    """
+
+    def __init__(self, core: MapperCore, pose_wait: float) -> None:
+        self.core = core
+        self.pose_wait = pose_wait
+        self.pending: collections.deque[tuple[float, Observations]] = collections.deque()
+        with core.lock:  # runs restored from the state file: say where they stand, first thing
+            self.acks: dict[str, Progress] = dict(core.runs)  # the latest, not yet published
+            self.order = _InOrder(core.runs.values())
+
+    def add(self, sample: zenoh.Sample) -> None:
+        """Take a received sample: refused if malformed, skipped if resent or out of order."""
+        try:
+            obs = unpack_observations(sample.payload.to_bytes())
+        except MessageError as err:
+            self.core.stats.refuse("observations", str(err))
+            return
+        if (skipped := self.order.take(obs.run, obs.seq, resends=obs.resends)) is not None:
+            self.core.stats.add(skipped)
+            return
+        if len(self.pending) >= MAX_PENDING:
+            _, oldest = self.pending.popleft()
+            self._done(oldest, integrated=False)
+            _count_drop(self.core.stats, oldest, BACKLOG, self.pose_wait)
+        self.pending.append((time.monotonic(), obs))
+
+    def process(self) -> int:
+        """Integrate or drop the observations at the head whose turn has come; how many."""
+        done = 0
+        while self.pending and self._process_head():
+            done += 1
+        return done
+
+    def _process_head(self) -> bool:
+        """Integrate or drop the oldest observation; False when it must wait longer."""
+        core = self.core
+        arrived, obs = self.pending[0]
+        with core.lock:
+            pose = core.poses.lookup(obs.stamp)
+            if pose is Lookup.WAIT and time.monotonic() - arrived < self.pose_wait:
+                core.lock.wait(timeout=0.05)  # woken by a new pose
+                return False
+            self.pending.popleft()
+            integrated = not isinstance(pose, Lookup)
+            if integrated:
+                core.map.integrate(obs, pose)
+                core.dirty = True
+            self._done(obs, integrated=integrated)
         if integrated:
-            core.map.integrate(obs, pose)
-            core.dirty = True
-        acks[obs.run] = core.count(obs.run, obs.seq, integrated=integrated)
-    if integrated:
-        core.stats.add("integrated")
-    else:
-        reason = DROP_REASONS[pose]
-        core.stats.add("dropped")
-        core.stats.note(
-            f"dropped.{reason}",
-            reason,
-            f"dropped the frame at {obs.stamp:.3f}: "
-            + (
-                f"no pose covered it within {pose_wait:.1f} s (is the pose source running?)"
-                if pose is Lookup.WAIT
-                else "no pose near its stamp (before the first pose, or in a gap)"
-            ),
-        )
-    return True
+            core.stats.add("integrated")
+        else:
+            _count_drop(core.stats, obs, DROP_REASONS[pose], self.pose_wait)
+        return True
+
+    def _done(self, obs: Observations, *, integrated: bool) -> None:
+        with self.core.lock:
+            self.acks[obs.run] = self.core.count(obs.run, obs.seq, integrated=integrated)
+
+
+def _count_drop(stats: Stats, obs: Observations, reason: str, pose_wait: float) -> None:
+    """Count and log (at most once a second per reason) a frame dropped for want of a pose."""
+    why = {
+        "pose_timeout": f"no pose covered it within {pose_wait:.1f} s (is a pose source running?)",
+        "no_pose": "no pose near its stamp (before the first pose, or in a gap)",
+        BACKLOG: f"{MAX_PENDING} newer frames wait for poses too (is a pose source running?)",
+    }[reason]
+    stats.add("dropped")
+    stats.note(f"dropped.{reason}", reason, f"dropped the frame at {obs.stamp:.3f}: {why}")
 
 
 def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> None:

@@ -9,6 +9,7 @@ on ``{prefix}/map/updates`` (and one query at start) and hold the poses onto the
 
 from __future__ import annotations
 
+import queue
 import threading
 
 import numpy as np
@@ -45,20 +46,26 @@ def run(
     tracker = PoseTracker(config)
     rows = rows or RowSelection()
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings) as session:
+    with open_session(settings, count=stats.add) as session:
         publisher = session.declare_publisher(
             keys.pose, congestion_control=zenoh.CongestionControl.BLOCK
         )
         frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
-        updates = None
+        # Map updates come at most twice a second; a callback queues them for the worker, which
+        # takes them before each frame (a channel read only then could fill and stall the session).
+        updates: queue.SimpleQueue[bytes] | None = None
+        updates_sub = None
         if config.use_walls:
-            updates = session.declare_subscriber(keys.map_updates, zenoh.handlers.FifoChannel(256))
+            updates = queue.SimpleQueue()
+            updates_sub = session.declare_subscriber(
+                keys.map_updates, lambda sample: updates.put(sample.payload.to_bytes())
+            )
         token = Presence(session, keys, "odometry", stats)
         if config.use_walls:
             _first_walls(session, keys, tracker, stats)
         worker = threading.Thread(
             target=_work,
-            args=(frames.handler, updates and updates.handler, tracker, rows, publisher, stats),
+            args=(frames.handler, updates, tracker, rows, publisher, stats),
             daemon=True,
         )
         worker.start()
@@ -72,8 +79,8 @@ def run(
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
         frames.undeclare()
-        if updates is not None:
-            updates.undeclare()
+        if updates_sub is not None:
+            updates_sub.undeclare()
         worker.join(timeout=5.0)
     return stats
 
@@ -89,19 +96,17 @@ def _first_walls(session: zenoh.Session, keys: Keys, tracker: PoseTracker, stats
         stats.refuse("map", str(err))
 
 
-def _take_updates(
-    channel: zenoh.handlers.Handler[zenoh.Sample], tracker: PoseTracker, stats: Stats
-) -> None:
-    while (sample := channel.try_recv()) is not None:
+def _take_updates(updates: queue.SimpleQueue[bytes], tracker: PoseTracker, stats: Stats) -> None:
+    while not updates.empty():
         try:
-            tracker.take_update(sample.payload.to_bytes())
+            tracker.take_update(updates.get_nowait())
         except MessageError as err:
             stats.refuse("map update", str(err))
 
 
 def _work(
     frames: zenoh.handlers.Handler[zenoh.Sample],
-    updates: zenoh.handlers.Handler[zenoh.Sample] | None,
+    updates: queue.SimpleQueue[bytes] | None,
     tracker: PoseTracker,
     rows: RowSelection,
     publisher: zenoh.Publisher,

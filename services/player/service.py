@@ -33,7 +33,7 @@ from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
-POLL = 0.001  # s between checks of the acknowledgement channel
+STOP_POLL = 0.05  # s between checks of the stop event while waiting for acknowledgements
 PROGRESS_PERIOD = 0.2  # s between progress messages
 RESEND_AFTER = 2.0  # s without an acknowledgement before frames are sent again (--fast)
 RESEND_MEMORY = 1024  # frames whose bag times are kept for sending again
@@ -99,11 +99,15 @@ class PlayResult:
 
 
 def _wait_for_services(
-    session: zenoh.Session, keys: Keys, names: tuple[str, ...], timeout: float
+    session: zenoh.Session,
+    keys: Keys,
+    names: tuple[str, ...],
+    timeout: float,
+    stop: threading.Event,
 ) -> None:
     deadline = time.monotonic() + timeout
     missing = set(names)
-    while missing:
+    while missing and not stop.is_set():
         for reply in session.liveliness().get(keys.health("*"), timeout=1.0):
             if reply.ok is not None:
                 missing.discard(str(reply.ok.key_expr).rsplit("/", 1)[-1])
@@ -114,7 +118,7 @@ def _wait_for_services(
             )
             raise PlayerError(msg)
         if missing:
-            time.sleep(0.1)
+            stop.wait(0.1)
 
 
 def _ask_rows(session: zenoh.Session, keys: Keys) -> RowSelection | None:
@@ -129,30 +133,38 @@ def _ask_rows(session: zenoh.Session, keys: Keys) -> RowSelection | None:
 
 
 class _Acks:
-    """The mapper's acknowledgements of this run, read from the progress channel."""
+    """The mapper's acknowledgements of this run, kept up to date by the progress subscriber.
 
-    def __init__(self, channel: zenoh.handlers.Handler[zenoh.Sample], run: str) -> None:
-        self.channel = channel
+    The subscriber hands each sample to ``on_sample`` (a few microseconds under a lock), so
+    acknowledgements never pile up in a channel nobody reads: in real-time playback nothing
+    waits for them, and a full channel would block the session's receiving thread, which then
+    can neither reconnect to a restarted router nor close.
+    """
+
+    def __init__(self, run: str) -> None:
         self.run = run
         self.processed = 0
         self.integrated = 0
         self.epoch: str | None = None  # the mapper process acknowledging
+        self._changed = threading.Condition()
         self.last_change = self.last_resend = time.monotonic()
 
-    def poll(self) -> None:
-        while (sample := self.channel.try_recv()) is not None:
-            try:
-                progress = unpack_progress(sample.payload.to_bytes())
-            except MessageError:
-                continue
-            if progress.run != self.run:
-                continue
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        """Zenoh's callback: take one acknowledgement (others' runs and malformed ones ignored)."""
+        try:
+            progress = unpack_progress(sample.payload.to_bytes())
+        except MessageError:
+            return
+        if progress.run != self.run:
+            return
+        with self._changed:
             # A new mapper process (restarted on its state file) may stand behind the old one:
             # its word counts, and what it lacks is sent again.
             if progress.epoch != self.epoch or progress.processed > self.processed:
                 self.epoch = progress.epoch
                 self.processed, self.integrated = progress.processed, progress.integrated
                 self.last_change = time.monotonic()
+                self._changed.notify_all()
 
     def wait_until(
         self,
@@ -167,22 +179,21 @@ class _Acks:
             Resend: no acknowledgement for ``resend_after`` s: frames were lost on the way.
             PlayerError: none for ``stall_timeout`` s.
         """
-        self.poll()
-        while self.processed < processed and not stop.is_set():
-            now = time.monotonic()
-            if now - self.last_change > stall_timeout:
-                msg = (
-                    f"the mapper acknowledged no frame for {stall_timeout:.0f} s "
-                    f"({self.processed} of {processed} done); is it running?"
-                )
-                raise PlayerError(msg)
-            if resend_after is not None and now - max(self.last_change, self.last_resend) > (
-                resend_after
-            ):
-                self.last_resend = now
-                raise Resend(self.processed)
-            time.sleep(POLL)
-            self.poll()
+        with self._changed:
+            while self.processed < processed and not stop.is_set():
+                now = time.monotonic()
+                if now - self.last_change > stall_timeout:
+                    msg = (
+                        f"the mapper acknowledged no frame for {stall_timeout:.0f} s "
+                        f"({self.processed} of {processed} done); is it running?"
+                    )
+                    raise PlayerError(msg)
+                if resend_after is not None and now - max(self.last_change, self.last_resend) > (
+                    resend_after
+                ):
+                    self.last_resend = now
+                    raise Resend(self.processed)
+                self._changed.wait(STOP_POLL)
 
 
 class Resend(Exception):  # noqa: N818 (a signal to go back, not an error)
@@ -350,11 +361,9 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             player.pose_source,
         )
         with open_session(settings) as session:
-            progress_sub = session.declare_subscriber(
-                keys.progress, zenoh.handlers.FifoChannel(256)
-            )
-            acks = _Acks(progress_sub.handler, run_id)
-            _wait_for_services(session, keys, player.wait_for, player.wait_timeout)
+            acks = _Acks(run_id)
+            progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
+            _wait_for_services(session, keys, player.wait_for, player.wait_timeout, stop)
             sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
             rows = None if player.whole_clouds or sensor == "scan" else _ask_rows(session, keys)
             log.info(

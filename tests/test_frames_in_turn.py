@@ -1,0 +1,69 @@
+"""A service's frames in turn: bursts worked off in order, skipping only when truly behind.
+
+A real Zenoh session (a peer on no network) delivers to its own subscriber, so the channel is the
+one the services read.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from wallmap.common.messages import Frame, pack
+from wallmap.common.runtime import BEHIND, Stats, frames_in_turn
+
+KEY = "test/frames"
+
+
+@pytest.fixture
+def local():
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", json.dumps([]))
+    with zenoh.open(conf) as session:
+        subscriber = session.declare_subscriber(KEY, zenoh.handlers.FifoChannel(256))
+        publisher = session.declare_publisher(KEY)
+        yield publisher, subscriber
+        subscriber.undeclare()
+
+
+def _put(publisher, n: int, *, resends: bool, run: str = "r") -> None:
+    points = np.zeros((1, 3, 3), np.float32)
+    for seq in range(n):
+        publisher.put(pack(Frame(run, seq, 1.0 + seq, "cam", points, np.eye(4), "depth", resends)))
+    time.sleep(0.2)  # delivered to the channel
+
+
+def _take(subscriber, stats: Stats, n: int) -> list[int]:
+    turns = frames_in_turn(subscriber.handler, stats)
+    return [next(turns).seq for _ in range(n)]
+
+
+def test_a_short_burst_is_worked_off_in_order(local) -> None:
+    publisher, subscriber = local
+    stats = Stats(logging.getLogger("test"))
+    _put(publisher, BEHIND, resends=False)
+    assert _take(subscriber, stats, BEHIND) == list(range(BEHIND))
+    assert "dropped" not in stats.snapshot()
+
+
+def test_far_behind_in_real_time_it_skips_to_the_newest_and_counts_the_rest(local) -> None:
+    publisher, subscriber = local
+    stats = Stats(logging.getLogger("test"))
+    _put(publisher, 40, resends=False)
+    assert _take(subscriber, stats, 1) == [39]
+    assert stats.snapshot()["dropped"] == 39
+
+
+def test_frames_of_a_player_that_sends_again_are_never_skipped(local) -> None:
+    publisher, subscriber = local
+    stats = Stats(logging.getLogger("test"))
+    _put(publisher, 40, resends=True)
+    assert _take(subscriber, stats, 40) == list(range(40))
+    assert "dropped" not in stats.snapshot()

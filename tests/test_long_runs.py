@@ -1,0 +1,186 @@
+"""Long bags in every playback mode, as separate processes over a real router.
+
+Each run checks every process's exit status and that none printed a traceback (the ``stack``
+fixture does, for every service it started). The bags are long enough that a run outlasts any
+small buffer: a channel of acknowledgements that nobody drained filled after 256 frames, blocked
+the player's session, and made real-time playback end in a close timeout (exit 1) and a router
+restart silently freeze the map. Short runs and ``--fast`` never showed it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from conftest import assert_clean_exit, free_port
+
+from wallmap.common.evaluation import evaluate_map
+from wallmap.common.scene import Camera, write_scene_bag
+
+pytestmark = pytest.mark.e2e
+
+RATE_HZ = 15.0
+SMALL = Camera(width=96, height=72)  # light frames: the bag's length is what matters here
+
+
+@pytest.fixture(scope="module")
+def long_bags(tmp_path_factory):
+    """A ROS 2 mcap depth bag of 720 frames (48 s) and a ROS 1 PointCloud2 bag of 360 (24 s)."""
+    folder = tmp_path_factory.mktemp("long")
+    depth = write_scene_bag(
+        folder / "depth", seed=31, n_frames=720, fmt="ros2-mcap", sensor="depth16", camera=SMALL
+    )
+    cloud = write_scene_bag(
+        folder / "cloud.bag", seed=32, n_frames=360, fmt="ros1", sensor="pointcloud",
+        camera=SMALL, compress=True,
+    )  # fmt: skip
+    return {"mcap-depth": depth, "ros1-pointcloud": cloud}
+
+
+def _services(stack) -> None:
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+
+
+def _published(output: str) -> int:
+    found = re.search(r"published (\d+) frames", output)
+    assert found, output
+    return int(found[1])
+
+
+@pytest.mark.parametrize(
+    ("bag", "speed"),
+    [
+        pytest.param("mcap-depth", ["--rate", "4"], id="mcap-rate4"),
+        pytest.param("mcap-depth", ["--rate", "8"], id="mcap-rate8"),
+        pytest.param("ros1-pointcloud", ["--rate", "8"], id="ros1-rate8"),
+        pytest.param("mcap-depth", ["--fast"], id="mcap-fast"),
+        pytest.param("ros1-pointcloud", ["--fast"], id="ros1-fast"),
+    ],
+)
+def test_a_long_bag_plays_to_the_end_and_every_process_exits_cleanly(
+    stack, long_bags, bag, speed
+) -> None:
+    scene = long_bags[bag]
+    _services(stack)
+    played = stack.run("player", str(scene.path), *speed, "--wait-for", "detector,mapper",
+                       *stack.zenoh_args)  # fmt: skip
+    assert _published(played.stdout) == scene.n_frames
+    reply, skipped = stack.settled_frames(scene.n_frames, "--min-obs", "3")
+    assert reply["frames"] + skipped == scene.n_frames, "every frame integrated or counted"
+    assert skipped <= scene.n_frames // 20
+    if "--fast" in speed:
+        assert skipped == 0
+    score = evaluate_map(reply["walls"], scene.plan, scene.seen_counts)
+    print(score.summary())
+    assert score.precision >= 0.9
+    assert score.recall >= 0.8
+
+
+def test_rate_1_on_a_short_bag(stack, long_bags) -> None:
+    scene = long_bags["mcap-depth"]
+    _services(stack)
+    started = time.monotonic()
+    played = stack.run("player", str(scene.path), "--duration", "5",
+                       "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    assert time.monotonic() - started >= 5.0, "real time"
+    n = _published(played.stdout)
+    assert n == 5 * RATE_HZ
+    reply, skipped = stack.settled_frames(n)
+    assert reply["frames"] + skipped == n
+
+
+def test_without_poses_the_frames_are_counted_as_dropped_and_all_exit_cleanly(
+    stack, long_bags
+) -> None:
+    scene = long_bags["mcap-depth"]
+    _services(stack)
+    played = stack.run("player", str(scene.path), "--rate", "8", "--pose-source", "none",
+                       *stack.zenoh_args)  # fmt: skip
+    assert _published(played.stdout) == scene.n_frames
+    assert "0 poses" in played.stdout
+    deadline = time.monotonic() + 20  # frames wait 5 s for a pose that never comes
+    while (reply := stack.query())["dropped"] + stack.counters("detector").get("dropped", 0) < (
+        scene.n_frames
+    ):
+        assert time.monotonic() < deadline, reply
+        time.sleep(0.5)
+    assert reply["frames"] == 0
+    assert reply["walls"] == []
+
+
+@pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGTERM], ids=["sigint", "sigterm"])
+def test_a_looping_player_stopped_by_a_signal_exits_0(stack, long_bags, how) -> None:
+    scene = long_bags["mcap-depth"]
+    _services(stack)
+    player = stack.start("player", "player", str(scene.path), "--rate", "8", "--loop",
+                         *stack.zenoh_args)  # fmt: skip
+    time.sleep(9.0)  # one pass (6 s) and half the next
+    assert player.proc.poll() is None, player.output()
+    assert player.stop(sig=how) == 0
+    assert _published(player.output()) > scene.n_frames, "it went round more than once"
+
+
+def test_up_stopped_by_ctrl_c_stops_its_services_cleanly(long_bags, tmp_path) -> None:
+    scene = long_bags["mcap-depth"]
+    log = tmp_path / "up.log"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with log.open("wb") as out:
+        up = subprocess.Popen(
+            [sys.executable, "-m", "wallmap", "up", str(scene.path), "--rate", "4",
+             "--connect", endpoint],
+            stdout=out, stderr=subprocess.STDOUT, env={**os.environ, "WALLMAP_LOG": "INFO"},
+        )  # fmt: skip
+        time.sleep(8.0)
+        up.send_signal(signal.SIGINT)
+        code = up.wait(timeout=60)
+    output = log.read_text()
+    assert_clean_exit("wallmap up", code, output, 0)
+    for service in ("mapper", "detector"):
+        assert f"{service}: stopping" in output, output
+    assert "published" in output, "the player said what it played"
+
+
+def test_router_killed_and_restarted_in_real_time_the_map_goes_on(stack, long_bags) -> None:
+    """SIGKILL the router 40 % into a 4x playback, a new one 2 s later on the same endpoint."""
+    scene = long_bags["mcap-depth"]
+    _services(stack)
+    router = stack.services[0]
+    player = stack.start("player", "player", str(scene.path), "--rate", "4",
+                         "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    played_s = scene.n_frames / RATE_HZ / 4
+    time.sleep(1.0 + 0.4 * played_s)  # the player waits about 1 s for its services
+    before = stack.query()["frames"]
+    router.kill()
+    time.sleep(2.0)
+    stack.start("router-2", "router", "--listen", stack.endpoint)
+    assert player.proc.wait(timeout=120) == 0, player.output()
+    assert _published(player.output()) == scene.n_frames
+    reply, skipped = stack.settled_frames(scene.n_frames)
+    after = reply["frames"]
+    lost = scene.n_frames - after - skipped
+    print(f"\nframes integrated: {before} before the kill, {after} in all; {lost} lost")
+    # What was published while no router ran is lost: 2 s and the new router's start (about
+    # 0.5 s), at 60 frames a second. Everything after that is integrated.
+    assert lost <= 4.0 * 4 * RATE_HZ
+    assert after - before >= 0.25 * scene.n_frames, "the map kept growing after the restart"
+    for name in ("mapper", "detector", "player"):
+        output = next(s for s in stack.services if s.name == name).output()
+        assert output.count("lost the Zenoh router") == 1, output
+        assert len(re.findall(r"reconnected to the Zenoh router after \d+\.\d s", output)) == 1
+    assert stack.counters("mapper")["router_lost"] == 1
+
+
+def test_a_player_waiting_for_its_services_stops_at_once_on_sigterm(stack, long_bags) -> None:
+    player = stack.start("player", "player", str(long_bags["mcap-depth"].path),
+                         "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    time.sleep(3.0)
+    asked = time.monotonic()
+    assert player.stop(timeout=10) == 0
+    assert time.monotonic() - asked < 3.0
+    assert "published 0 frames" in player.output()
