@@ -297,6 +297,10 @@ class _Waiting:
             return
         if (skipped := self.order.take(obs.run, obs.seq, resends=obs.resends)) is not None:
             self.core.stats.add(skipped)
+            if skipped == "resent":  # its acknowledgement was lost on the way: say it again
+                with self.core.lock:
+                    if (progress := self.core.runs.get(obs.run)) is not None:
+                        self.acks[obs.run] = progress
             return
         if len(self.pending) >= MAX_PENDING:
             _, oldest = self.pending.popleft()
