@@ -52,8 +52,8 @@ def real_bags(out: Path | None) -> None:
     print(f"{'bag':<36} {'walls':>6} {'scans':>9} {'on walls':>9} {'dups':>5} {'longest':>12}"
           f" {'angle':>6} {'ms/scan':>8}")  # fmt: skip
     for bag in sorted(REAL.glob("*")):
-        if bag.name == "README.md":
-            continue
+        if bag.name == "README.md" or (bag.is_dir() and not (bag / "metadata.yaml").exists()):
+            continue  # rgbd/ holds depth recordings: benchmarks/real_rgbd.py maps them
         try:
             with BagSource(bag, pose_source="none") as source:
                 n_scans = source.frame_count

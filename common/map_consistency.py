@@ -76,16 +76,20 @@ def _overlap(a: MappedWall, b: MappedWall) -> float:
 
 
 def duplicates(
-    walls: Sequence[MappedWall], max_angle_deg: float = 3.0, max_offset: float = 0.10
+    walls: Sequence[MappedWall],
+    max_angle_deg: float = 3.0,
+    max_offset: float = 0.10,
+    min_overlap: float = 0.0,
 ) -> list[tuple[int, int]]:
     """Pairs of walls within ``max_angle_deg`` and ``max_offset`` whose extents overlap.
 
-    The offset is measured from the middle of the overlap on one wall to the other's line.
+    The offset is measured from the middle of the overlap on one wall to the other's line; the
+    overlap must exceed ``min_overlap`` (m).
     """
     pairs = []
     for a, b in itertools.combinations(walls, 2):
         cos = abs(float(a.direction @ b.direction))
-        if math.degrees(math.acos(min(cos, 1.0))) > max_angle_deg or _overlap(a, b) <= 0.0:
+        if math.degrees(math.acos(min(cos, 1.0))) > max_angle_deg or _overlap(a, b) <= min_overlap:
             continue
         axis = a.direction
         ta = a.segments.reshape(-1, 2) @ axis
@@ -97,6 +101,14 @@ def duplicates(
         if abs(float((middle - b.segments[0, 0]) @ normal_b)) <= max_offset:
             pairs.append((a.id, b.id))
     return pairs
+
+
+def fans(walls: Sequence[MappedWall]) -> list[tuple[int, int]]:
+    """Near-parallel lines for one surface: within 8 degrees and 30 cm, overlapping > 0.3 m.
+
+    What a detector that blends clutter into walls leaves behind on real RGB-D data.
+    """
+    return duplicates(walls, max_angle_deg=8.0, max_offset=0.30, min_overlap=0.3)
 
 
 def angle_between(a: MappedWall, b: MappedWall) -> float:

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.codec import MessageError, decode, encode
+from wallmap.common.pose3d import pose_matrix, rpy_from_quaternion
 
 Array = NDArray[np.float64]
 
@@ -97,9 +98,11 @@ def _require_map(m: object) -> dict[str, Any]:
 
 @dataclass(frozen=True, eq=False)  # array fields make generated equality ambiguous
 class Pose:
-    """A robot pose in the map frame: the contract's ``{prefix}/pose``.
+    """A robot (or sensor) pose in the map frame: the contract's ``{prefix}/pose``.
 
-    ``cov`` is the 3x3 covariance of (x, y, yaw), or None when the source gives none.
+    ``cov`` is the 3x3 covariance of (x, y, yaw), or None when the source gives none. ``z``,
+    ``roll`` and ``pitch`` make it a 6-DoF pose (a handheld camera, a SLAM's camera pose); the
+    map uses the planar part, the rest belongs with the frame's mounting (``common.pose3d``).
     """
 
     stamp: float
@@ -109,14 +112,27 @@ class Pose:
     cov: Array | None = None
     frame: str = "map"
     child: str = "base_link"
+    z: float = 0.0
+    roll: float = 0.0
+    pitch: float = 0.0
 
     @property
     def vector(self) -> Array:
         """(x, y, yaw) as an array."""
         return np.array([self.x, self.y, self.yaw])
 
+    @property
+    def is_planar(self) -> bool:
+        """Whether it lies on the floor, level (no height, roll or pitch)."""
+        return self.z == 0.0 and self.roll == 0.0 and self.pitch == 0.0
+
+    @property
+    def matrix(self) -> Array:
+        """The 4x4 transform frame <- child."""
+        return pose_matrix(self.x, self.y, self.z, self.roll, self.pitch, self.yaw)
+
     def to_map(self) -> dict[str, Any]:
-        """Plain map for encoding."""
+        """Plain map for encoding; the 6-DoF fields only when the pose has them."""
         m: dict[str, Any] = {
             "stamp": self.stamp,
             "frame": self.frame,
@@ -125,24 +141,53 @@ class Pose:
             "y": self.y,
             "yaw": self.yaw,
         }
+        if not self.is_planar:
+            m.update(z=self.z, roll=self.roll, pitch=self.pitch)
         if self.cov is not None:
             m["cov"] = self.cov.tolist()
         return m
 
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> Pose:
-        """Validate and build; raises MessageError."""
+        """Validate and build; raises MessageError.
+
+        A quaternion ``q`` ([qx, qy, qz, qw]) defines roll, pitch and yaw; without it ``yaw`` is
+        required and ``roll``, ``pitch`` (and ``z``) default to 0.
+        """
         m = _require_map(m)
         cov = m.get("cov")
+        if "q" in m:
+            roll, pitch, yaw = rpy_from_quaternion(_quaternion(m["q"]))
+        else:
+            yaw = _finite(m, "yaw")
+            roll, pitch = _optional(m, "roll"), _optional(m, "pitch")
         return cls(
             stamp=_finite(m, "stamp"),
             x=_finite(m, "x"),
             y=_finite(m, "y"),
-            yaw=_finite(m, "yaw"),
+            yaw=yaw,
             cov=None if cov is None else _covariance(cov, 3, "cov"),
             frame=_str(m, "frame", "map"),
             child=_str(m, "child", "base_link"),
+            z=_optional(m, "z"),
+            roll=roll,
+            pitch=pitch,
         )
+
+
+def _optional(m: dict[str, Any], key: str) -> float:
+    """An optional finite number, 0 when absent."""
+    return _finite(m, key) if key in m else 0.0
+
+
+def _quaternion(value: Any) -> tuple[float, float, float, float]:
+    q = _matrix(value, (4,), "q")
+    norm = float(np.linalg.norm(q))
+    if not 0.9 < norm < 1.1:
+        msg = f"field 'q' must be a unit quaternion [qx, qy, qz, qw], its norm is {norm:.3g}"
+        raise MessageError(msg)
+    qx, qy, qz, qw = (float(v) / norm for v in q)
+    return qx, qy, qz, qw
 
 
 def _flag(m: dict[str, Any], name: str) -> bool:
@@ -162,7 +207,9 @@ class Frame:
     acknowledge them and a player in ``--fast`` mode can wait. ``sensor`` says whose noise the
     points carry: a depth camera's (``depth``, even when the player sent only the chosen row) or
     a 2-D scanner's (``scan``). ``resends`` says the player sends lost frames again (``--fast``),
-    so the mapper waits for a missing frame rather than skip it.
+    so the mapper waits for a missing frame rather than skip it. ``band`` (low, high) says the
+    points are the stack of that height band the player picked (``scan_row.pick_points``), not
+    a whole cloud.
     """
 
     run: str
@@ -173,6 +220,7 @@ class Frame:
     base_from_sensor: Array
     sensor: str = "depth"
     resends: bool = False
+    band: tuple[float, float] | None = None
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding (the points go as raw bytes)."""
@@ -185,6 +233,7 @@ class Frame:
             "base_from_sensor": self.base_from_sensor,
             "sensor": self.sensor,
             "resends": self.resends,
+            **({} if self.band is None else {"band": list(self.band)}),
         }
 
     @classmethod
@@ -207,7 +256,18 @@ class Frame:
             base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
             sensor=_sensor(m),
             resends=_flag(m, "resends"),
+            band=_band(m),
         )
+
+
+def _band(m: dict[str, Any]) -> tuple[float, float] | None:
+    if m.get("band") is None:
+        return None
+    band = _matrix(m["band"], (2,), "band")
+    if not band[0] < band[1]:
+        msg = f"field 'band' must be [low, high] with low below high, got {band.tolist()}"
+        raise MessageError(msg)
+    return float(band[0]), float(band[1])
 
 
 @dataclass(frozen=True)
@@ -263,6 +323,11 @@ class Observations:
     """The detector's output for one frame, also when it found no wall.
 
     ``resends`` is copied from the frame: the mapper waits for a missing frame only then.
+    ``rays`` is what the sensor saw through, in the base frame: the sensor's position
+    ``ray_origin`` and (n, 2) points where some of its rays in the height band ended (the
+    farthest return of sampled image columns). Space between them is free: a mapped wall that
+    such a ray crosses well before its end was not a wall there. ``sensor`` is the frame's
+    (``depth`` or ``scan``): a depth camera sees clutter in 3-D that a scanner does not.
     """
 
     run: str
@@ -271,17 +336,24 @@ class Observations:
     frame: str
     walls: list[WallObservation] = field(default_factory=list)
     resends: bool = False
+    ray_origin: Array | None = None
+    rays: Array | None = None
+    sensor: str = "depth"
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
-        return {
+        m = {
             "run": self.run,
             "seq": self.seq,
             "stamp": self.stamp,
             "frame": self.frame,
             "walls": [w.to_map() for w in self.walls],
             "resends": self.resends,
+            "sensor": self.sensor,
         }
+        if self.rays is not None and self.ray_origin is not None:
+            m["free"] = {"origin": self.ray_origin.tolist(), "ends": self.rays.tolist()}
+        return m
 
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> Observations:
@@ -291,6 +363,7 @@ class Observations:
         if not isinstance(walls, list):
             msg = "field 'walls' must be a list"
             raise MessageError(msg)
+        origin, rays = _free(m)
         return cls(
             run=_str(m, "run"),
             seq=_int(m, "seq"),
@@ -298,7 +371,27 @@ class Observations:
             frame=_str(m, "frame", "base_link"),
             walls=[WallObservation.from_map(w) for w in walls],
             resends=_flag(m, "resends"),
+            ray_origin=origin,
+            rays=rays,
+            sensor=_sensor(m),
         )
+
+
+MAX_RAYS = 4096
+
+
+def _free(m: dict[str, Any]) -> tuple[Array | None, Array | None]:
+    """The optional ``free`` field: the rays' origin (2,) and ends (n, 2)."""
+    free = m.get("free")
+    if free is None:
+        return None, None
+    free = _require_map(free)
+    ends = _get(free, "ends")
+    if not isinstance(ends, list) or len(ends) > MAX_RAYS:
+        msg = f"field 'free.ends' must be a list of at most {MAX_RAYS} points"
+        raise MessageError(msg)
+    origin = _matrix(_get(free, "origin"), (2,), "free.origin")
+    return origin, _matrix(ends, (len(ends), 2), "free.ends") if ends else np.zeros((0, 2))
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,16 @@
-"""ROS pose messages and tf transforms reduced to planar poses.
+"""ROS pose messages and tf transforms as poses, with all six degrees of freedom.
 
 Shared by the player (poses read from bags) and the mapper (poses received from a ROS 2 system
-over Zenoh as CDR bytes). The robot is assumed level: yaw is the rotation about z.
+over Zenoh as CDR bytes). The mapper uses the planar part (x, y, yaw: yaw is the heading of the
+child's x axis); the player keeps height, roll and pitch with the frame they belong to.
 """
 
-import math
 from typing import Any
 
 import numpy as np
 
 from wallmap.common.messages import Pose
+from wallmap.common.pose3d import rpy_from_matrix, rpy_from_quaternion
 from wallmap.common.tf_buffer import normalize_frame
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
@@ -31,11 +32,6 @@ def header_stamp(header: Any, receive_time_ns: int) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def yaw_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> float:
-    """Heading about z of a rotation, assuming the robot stays level (planar motion)."""
-    return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-
-
 def planar_covariance(covariance: Any) -> np.ndarray | None:
     """The (x, y, yaw) block of a ROS 6x6 pose covariance; None when it is all zero (unset)."""
     full = np.asarray(covariance, dtype=np.float64).reshape(6, 6)
@@ -45,13 +41,14 @@ def planar_covariance(covariance: Any) -> np.ndarray | None:
 
 
 def pose_from_matrix(matrix: np.ndarray, stamp: float, frame: str, child: str) -> Pose:
-    """Reduce a 4x4 tf transform (frame <- child) to a planar pose."""
-    yaw = math.atan2(float(matrix[1, 0]), float(matrix[0, 0]))
-    return Pose(stamp, float(matrix[0, 3]), float(matrix[1, 3]), yaw, None, frame, child)
+    """A 4x4 tf transform (frame <- child) as a pose."""
+    roll, pitch, yaw = rpy_from_matrix(matrix[:3, :3])
+    x, y, z = (float(v) for v in matrix[:3, 3])
+    return Pose(stamp, x, y, yaw, None, frame, child, z, roll, pitch)
 
 
 def pose_from_message(msg: Any, receive_time_ns: int, child: str) -> Pose:
-    """Reduce an Odometry, PoseStamped or PoseWithCovarianceStamped message to a planar pose.
+    """An Odometry, PoseStamped or PoseWithCovarianceStamped message as a pose.
 
     Args:
         msg: The deserialized message.
@@ -69,12 +66,16 @@ def pose_from_message(msg: Any, receive_time_ns: int, child: str) -> Pose:
     if msg.__msgtype__ == ODOMETRY_TYPE and msg.child_frame_id:
         child = normalize_frame(msg.child_frame_id)
     q = pose.orientation
+    roll, pitch, yaw = rpy_from_quaternion((q.x, q.y, q.z, q.w))
     return Pose(
         stamp,
         float(pose.position.x),
         float(pose.position.y),
-        yaw_from_quaternion(q.x, q.y, q.z, q.w),
+        yaw,
         cov,
         normalize_frame(msg.header.frame_id) or DEFAULT_PARENT,
         child,
+        float(pose.position.z),
+        roll,
+        pitch,
     )

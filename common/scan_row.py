@@ -3,17 +3,24 @@
 The paper takes one fixed upper row of the image, to look over furniture. Two things go wrong
 with a fixed row: far away it climbs onto the ceiling, and a ceiling (or floor) seen by one image
 row is itself a straight line in 2-D, so it comes out as a phantom wall; and its height depends on
-the camera's tilt. The default here is a *height band* in the base frame instead: per image
-column, the point whose height is nearest the middle of the band, which keeps above furniture and
-below the ceiling at every range and any tilt. Walls are vertical, so every point on a wall, at
-any height, projects onto the wall's 2-D line. ``docs/detector.md`` compares the two on generated
-scenes.
+the camera's tilt. The default here is a *height band* in the base frame instead, and more than
+one row of it: per image column, the points nearest ``STACK`` heights spread over the band. Walls
+are vertical planes, so a wall's points at every height fall onto one spot of the floor plan;
+a kettle, a box or a cabinet front does not rise through the band, and a counter top or a chair
+seat is level. ``upright_points`` keeps, per column, a point only where what it lies on rises
+through the band, which the paper's single row cannot see. ``docs/detector.md`` compares the
+choices on generated scenes.
+
+The band adapts to the sensor (``auto_band``): a handheld camera 1.4 m up looking down sees
+nothing at 1.3 to 2.1 m, the band that suits a robot's level camera.
 
 A frame with a single row is a 2-D scanner's scan and is used as it is.
 """
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -24,6 +31,15 @@ from wallmap.common.codec import MessageError
 
 Array = NDArray[np.float64]
 SEARCHED_ROWS = 64  # the band is looked for on about this many image rows (up to twice)
+
+
+DEFAULT_BAND = (1.3, 2.1)  # m above the floor: over furniture, under the ceiling
+STACK = 6  # heights per column within the band
+FURNITURE = 0.9  # m: tables, counters and desks stay below this
+MIN_BAND = 0.3  # m: a band narrower than this holds too few heights to tell walls from clutter
+UPRIGHT_SHARE = 0.6  # of the band (or of what a column sees of it) a surface must rise through
+UPRIGHT_TOP = 0.1  # m: a wall reaches to within this of the top of what its column sees
+UPRIGHT_CELL = 0.04  # m: points this close on the floor plan stand on one spot
 
 
 @dataclass(frozen=True)
@@ -37,57 +53,162 @@ class RowSelection:
     """
 
     mode: Literal["band", "row"] = "band"
-    band: tuple[float, float] = (1.3, 2.1)
+    band: tuple[float, float] | None = None
     row_fraction: float = 0.25
 
     def to_map(self) -> dict[str, Any]:
         """What the detector tells players, so they send this row only."""
-        return {"mode": self.mode, "band": list(self.band), "row_fraction": self.row_fraction}
+        band = "auto" if self.band is None else list(self.band)
+        return {"mode": self.mode, "band": band, "row_fraction": self.row_fraction}
 
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> RowSelection:
         """Read what a detector said; MessageError when it makes no sense."""
         try:
-            mode, (low, high), fraction = m["mode"], m["band"], float(m["row_fraction"])
-            band = (float(low), float(high))
+            mode, fraction = m["mode"], float(m["row_fraction"])
+            band = None if m["band"] in ("auto", None) else parse_band(m["band"])
         except (KeyError, TypeError, ValueError) as err:
             msg = f"malformed row selection: {err}"
             raise MessageError(msg) from err
-        if (
-            not isinstance(mode, str)
-            or mode not in ("band", "row")
-            or not low < high
-            or not 0.0 <= fraction <= 1.0
-        ):
+        if not isinstance(mode, str) or mode not in ("band", "row") or not 0.0 <= fraction <= 1.0:
             msg = f"row selection out of range: {m!r}"
             raise MessageError(msg)
         return cls(mode, band, fraction)
 
 
-def _to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
+def parse_band(value: Any) -> tuple[float, float]:
+    """A band (low, high) in metres from a two-element sequence; ValueError if it is not one."""
+    low, high = (float(v) for v in value)
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        msg = f"band must be two finite heights, low below high, got {value!r}"
+        raise ValueError(msg)
+    return low, high
+
+
+def auto_band(heights: Array, default: tuple[float, float] = DEFAULT_BAND) -> tuple[float, float]:
+    """The height band a sensor can see, above furniture and below the ceiling.
+
+    ``heights`` are of the points the sensor saw, above the floor. The band reaches up to just
+    below the highest heights seen (at most the default's top, under the ceiling's clutter) and
+    is as tall as the default, but never reaches down into furniture (0.9 m): a sensor that
+    sees nothing above furniture height (a camera looking down at a cabinet) sees no wall. A
+    sensor that sees the whole default band gets the default.
+    """
+    low_default, high_default = default
+    seen = heights[np.isfinite(heights)]
+    if seen.size < 100:
+        return default
+    high = min(high_default, float(np.percentile(seen, 97.0)) - 0.05)
+    low = max(FURNITURE, min(low_default, high - (high_default - low_default)))
+    high = max(high, low + MIN_BAND)  # never down into the furniture: rather a band unseen
+    return round(low, 2), round(high, 2)
+
+
+def to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
+    """Sensor-frame points (..., 3) as base-frame floor positions (..., 2), NaN where none."""
     xy = points.astype(np.float64) @ base_from_sensor[:2, :3].T + base_from_sensor[:2, 3]
     xy[~np.isfinite(xy).all(axis=-1)] = np.nan
     return xy
 
 
-def band_points(
-    points: NDArray[np.float32], base_from_sensor: Array, band: tuple[float, float]
-) -> NDArray[np.float32]:
-    """Per column, the point nearest the middle of the height band (sensor frame); NaN if none."""
-    low, high = band
+def _heights(points: NDArray[np.float32], base_from_sensor: Array) -> NDArray[np.float32]:
     a, b, c, d = base_from_sensor[2].astype(np.float32)
     # Per axis rather than a matrix product: the player hands a strided view over the message.
     height = points[..., 0] * a
     height += points[..., 1] * b
     height += points[..., 2] * c
     height += d
-    inside = (height >= low) & (height <= high)  # NaN compares False
-    cost = np.where(inside, np.abs(height - 0.5 * (low + high)), np.inf)
-    best = np.argmin(cost, axis=0)
+    return height
+
+
+def band_stack(
+    points: NDArray[np.float32], base_from_sensor: Array, band: tuple[float, float]
+) -> NDArray[np.float32]:
+    """Per column, the points nearest ``STACK`` heights spread over the band: (STACK, w, 3).
+
+    A height gets the point nearest it within half the spacing of the heights, or NaN.
+    """
+    low, high = band
+    spacing = (high - low) / STACK
+    height = _heights(points, base_from_sensor)
     columns = np.arange(points.shape[1])
-    chosen = points[best, columns]
-    chosen[~inside[best, columns]] = np.nan
-    return chosen
+    stack = np.full((STACK, points.shape[1], 3), np.nan, dtype=np.float32)
+    for level in range(STACK):
+        target = low + (level + 0.5) * spacing
+        cost = np.abs(height - target)
+        cost[~(cost <= 0.5 * spacing)] = np.inf  # NaN heights too
+        best = np.argmin(cost, axis=0)
+        found = np.isfinite(cost[best, columns])
+        stack[level, found] = points[best[found], columns[found]]
+    return stack
+
+
+def upright_points(stack: NDArray[np.float32], base_from_sensor: Array) -> NDArray[np.float32]:
+    """Per column, the stack's point on something that rises through the band; NaN if none.
+
+    A point's rise is the spread of heights of all stack points (every column's) standing on
+    the same spot of the floor plan, within ``UPRIGHT_CELL``: a wall's points at every height
+    share its spot, a kettle's reach only its top, a counter's or a seat's one height. A point
+    is kept if it rises through most (``UPRIGHT_SHARE``) of the band, or of the part of the
+    band its column sees at all (near a camera only a sliver of it is in view), and if what it
+    stands on reaches the top of what its column sees: an appliance on a counter ends below the
+    wall seen above it. Of a column's kept points, the one rising highest is taken, then the
+    one nearest the band's middle.
+    """
+    levels, width = stack.shape[:2]
+    height = _heights(stack, base_from_sensor).astype(np.float64)
+    xy = to_base_xy(stack, base_from_sensor)
+    valid = np.isfinite(height) & np.isfinite(xy).all(axis=-1)
+    rise = np.zeros((levels, width))
+    top = np.full((levels, width), -np.inf)
+    if valid.any():
+        cells = np.floor(xy[valid] / UPRIGHT_CELL).astype(np.int64)
+        low, top[valid] = _spread(cells, height[valid])
+        rise[valid] = top[valid] - low
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # columns with no point at all
+        seen = np.where(valid, height, np.nan)
+        column_top = np.nanmax(seen, axis=0)
+        visible = np.nan_to_num(column_top - np.nanmin(seen, axis=0))
+    band = float(np.nanmax(seen) - np.nanmin(seen)) if valid.any() else 0.0
+    kept = valid & (rise >= np.minimum(UPRIGHT_SHARE * band, UPRIGHT_SHARE * visible))
+    kept &= top >= column_top - UPRIGHT_TOP
+    middle = 0.5 * (levels - 1)
+    preference = np.where(kept, rise - 1e-3 * np.abs(np.arange(levels)[:, None] - middle), -np.inf)
+    best = np.argmax(preference, axis=0)
+    columns = np.arange(width)
+    # The column's point: the mean of its kept points on the best one's spot. A depth camera's
+    # steps (a Kinect's are 4 cm at 3.5 m) fall at other columns on other rows, so the mean
+    # of a wall's heights lies on the wall, where one row's points lie on a staircase.
+    same = kept & (np.linalg.norm(xy - xy[best, columns], axis=-1) <= 2 * UPRIGHT_CELL)
+    weights = same.astype(np.float32)[..., None]
+    with np.errstate(invalid="ignore"):
+        out = (np.nan_to_num(stack) * weights).sum(axis=0) / weights.sum(axis=0)
+    out[~kept[best, columns]] = np.nan
+    return out.astype(np.float32)
+
+
+_NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)], dtype=np.int64)
+_ROW = 1_000_003  # cell key = x * _ROW + y: unique for any floor plan a sensor sees
+
+
+def _spread(cells: NDArray[np.int64], values: Array) -> tuple[Array, Array]:
+    """Per point, the lowest and highest ``values`` over its floor cell and the 8 around it."""
+    keys = cells[:, 0] * _ROW + cells[:, 1]
+    unique, inverse = np.unique(keys, return_inverse=True)
+    low = np.full(unique.size, np.inf)
+    high = np.full(unique.size, -np.inf)
+    np.minimum.at(low, inverse, values)
+    np.maximum.at(high, inverse, values)
+    around = (cells[None, :, 0] + _NEIGHBOURS[:, 0, None]) * _ROW + (
+        cells[None, :, 1] + _NEIGHBOURS[:, 1, None]
+    )  # (9, N)
+    where = np.minimum(np.searchsorted(unique, around), unique.size - 1)
+    present = unique[where] == around
+    return (
+        np.where(present, low[where], np.inf).min(axis=0),
+        np.where(present, high[where], -np.inf).max(axis=0),
+    )
 
 
 def rows_to_search(how: RowSelection, height: int) -> slice:
@@ -106,25 +227,80 @@ def rows_to_search(how: RowSelection, height: int) -> slice:
 
 
 def pick_points(
-    searched: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+    searched: NDArray[np.float32],
+    base_from_sensor: Array,
+    band: tuple[float, float],
 ) -> NDArray[np.float32]:
-    """The scan row (columns x 3) from the rows ``rows_to_search`` chose, and only those."""
+    """What a player sends of the rows ``rows_to_search`` chose: the band's stack, or the row.
+
+    Returns (STACK, w, 3) for a band, or the one searched row (a scan, or ``row`` mode).
+    """
     if searched.shape[0] == 1:
-        return searched[0]
-    return band_points(searched, base_from_sensor, how.band)
+        return searched
+    return band_stack(searched, base_from_sensor, band)
+
+
+def frame_band(
+    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+) -> tuple[float, float]:
+    """The band for a whole cloud: the selection's, or what this frame's sensor sees."""
+    if how.band is not None:
+        return how.band
+    searched = points[rows_to_search(how, points.shape[0])]
+    return auto_band(_heights(searched, base_from_sensor).ravel().astype(np.float64))
+
+
+def frame_stack(
+    points: NDArray[np.float32],
+    base_from_sensor: Array,
+    how: RowSelection,
+    stacked: bool = False,
+) -> NDArray[np.float32]:
+    """A frame's points as the detector reads them: the band's stack (k, w, 3), or one row.
+
+    ``points`` is a whole organized cloud, one row (a scan), or, with ``stacked``, the band's
+    stack a player sent (``pick_points``).
+    """
+    if points.shape[0] == 1 or stacked:
+        return points
+    band = frame_band(points, base_from_sensor, how)
+    return pick_points(points[rows_to_search(how, points.shape[0])], base_from_sensor, band)
 
 
 def select_points(
-    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+    points: NDArray[np.float32],
+    base_from_sensor: Array,
+    how: RowSelection,
+    stacked: bool = False,
 ) -> NDArray[np.float32]:
-    """The scan row (columns x 3, sensor frame, NaN for no point) chosen from an organized cloud.
+    """The scan row (columns x 3, sensor frame, NaN for no point) from a frame's points."""
+    stack = frame_stack(points, base_from_sensor, how, stacked)
+    return stack[0] if stack.shape[0] == 1 else upright_points(stack, base_from_sensor)
 
-    The player applies it too, so that only this row travels (see RowSelection.to_map).
+
+MAX_FREE_RAYS = 64  # rays a frame reports as free space
+
+
+def free_rays(stack: NDArray[np.float32], base_from_sensor: Array) -> tuple[Array, Array]:
+    """Where some of the sensor's rays in the band ended: its position and (n, 2) ends.
+
+    Per sampled column the farthest return of the stack, in the base frame: the space from
+    the sensor to it is free at some height of the band, whatever stands nearer below it.
     """
-    searched = points[rows_to_search(how, points.shape[0])]
-    return pick_points(searched, base_from_sensor, how)
+    origin = base_from_sensor[:2, 3].astype(np.float64)
+    xy = to_base_xy(stack, base_from_sensor)
+    reach = np.linalg.norm(xy - origin, axis=-1)
+    reach[~np.isfinite(reach)] = -1.0
+    farthest = np.argmax(reach, axis=0)
+    columns = np.arange(stack.shape[1])
+    ends = xy[farthest, columns][reach[farthest, columns] > 0]
+    if len(ends) > MAX_FREE_RAYS:
+        ends = ends[np.linspace(0, len(ends) - 1, MAX_FREE_RAYS).round().astype(int)]
+    return origin, ends
 
 
-def select_scan(points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection) -> Array:
+def select_scan(
+    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection, stacked: bool = False
+) -> Array:
     """The scan row as 2-D points in the base frame (columns x 2, NaN for no point)."""
-    return _to_base_xy(select_points(points, base_from_sensor, how), base_from_sensor)
+    return to_base_xy(select_points(points, base_from_sensor, how, stacked), base_from_sensor)

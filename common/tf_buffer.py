@@ -12,6 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.common.pose3d import Quaternion, Vector3, slerp, transform_matrix
+from wallmap.common.pose3d import invert as _inverse
+
 __all__ = ["TfBuffer", "TfError", "normalize_frame", "transform_matrix"]
 
 
@@ -19,56 +22,9 @@ class TfError(LookupError):
     """A tf lookup that cannot be answered: unknown frame, no path, or extrapolation."""
 
 
-Quaternion = tuple[float, float, float, float]
-Vector3 = tuple[float, float, float]
-
-
 def normalize_frame(frame: str) -> str:
     """Strip the leading '/' that ROS 1 frame names often carry, so '/odom' == 'odom'."""
     return frame.lstrip("/")
-
-
-def transform_matrix(translation: Vector3, quaternion: Quaternion) -> np.ndarray:
-    """Build the 4x4 homogeneous transform of a translation and a unit quaternion (x, y, z, w)."""
-    x, y, z, w = quaternion
-    tx, ty, tz = translation
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), tx],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), ty],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), tz],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
-
-
-def _inverse(matrix: np.ndarray) -> np.ndarray:
-    """Invert a rigid transform without a general matrix inverse."""
-    out = np.eye(4)
-    rotation_t = matrix[:3, :3].T
-    out[:3, :3] = rotation_t
-    out[:3, 3] = -rotation_t @ matrix[:3, 3]
-    return out
-
-
-def _slerp(q0: Quaternion, q1: Quaternion, weight: float) -> Quaternion:
-    """Spherical interpolation along the shorter arc, as tf2 does between two samples."""
-    ax, ay, az, aw = q0
-    bx, by, bz, bw = q1
-    dot = ax * bx + ay * by + az * bz + aw * bw
-    if dot < 0.0:
-        bx, by, bz, bw, dot = -bx, -by, -bz, -bw, -dot
-    if dot > 0.9995:
-        # Nearly parallel: the sine ratios are ill-conditioned, a normalised lerp is exact enough.
-        w0, w1 = 1.0 - weight, weight
-    else:
-        theta = math.acos(dot)
-        sin_theta = math.sin(theta)
-        w0 = math.sin((1.0 - weight) * theta) / sin_theta
-        w1 = math.sin(weight * theta) / sin_theta
-    x, y, z, w = w0 * ax + w1 * bx, w0 * ay + w1 * by, w0 * az + w1 * bz, w0 * aw + w1 * bw
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    return (x / norm, y / norm, z / norm, w / norm)
 
 
 class _Edge:
@@ -130,7 +86,7 @@ class _Edge:
         weight = (stamp - t0) / (t1 - t0)
         p0, p1 = self._translations[index - 1], self._translations[index]
         translation = p0 + (p1 - p0) * weight
-        rotation = _slerp(
+        rotation = slerp(
             tuple(self._quaternions[index - 1].tolist()),
             tuple(self._quaternions[index].tolist()),
             weight,
@@ -280,6 +236,25 @@ class TfBuffer:
             step = edge.matrix_at(stamp, slack, query)
             result = (step if upward else _inverse(step)) @ result
         return result
+
+    def moving_frame(self, fixed: str, sensor: str) -> str | None:
+        """The frame that moves in ``fixed`` and carries ``sensor``: a pose source's child.
+
+        On the chain from the fixed frame to the sensor, the child of the last edge that
+        changes over time (``map -> camera_link`` of a handheld camera, whose
+        ``camera_link -> optical`` is static); None when the two are not connected.
+        """
+        fixed, sensor = normalize_frame(fixed), normalize_frame(sensor)
+        path = self._path(sensor, fixed)
+        if not path:
+            return None
+        frame = fixed
+        moving = None
+        for edge, upward in path:
+            frame = edge.parent if upward else edge.child
+            if not edge.static:
+                moving = frame
+        return moving if moving is not None else sensor
 
     def _path(self, target: str, source: str) -> list[_Step] | None:
         """Edges from source to target (breadth-first, so the shortest chain), cached."""

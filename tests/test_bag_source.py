@@ -14,7 +14,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from wallmap.common.messages import Pose
-from wallmap.common.scan_row import RowSelection, rows_to_search, select_points
+from wallmap.common.scan_row import STACK, RowSelection, rows_to_search, select_points
 from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import transform_matrix
 from wallmap.services.player.bag_source import BagSource
@@ -235,7 +235,7 @@ def test_ros1_pointcloud_bag_with_tf(tmp_path: Path) -> None:
         assert frame.stamp == pytest.approx(stamp)
         assert frame.frame_id == "camera_link"
         np.testing.assert_array_equal(frame.points, grid() + i)
-        np.testing.assert_allclose(frame.T_base_sensor, transform_matrix(*MOUNT))
+        np.testing.assert_allclose(frame.T_base_sensor, transform_matrix(*MOUNT), atol=1e-12)
         assert pose is not None
         assert (pose.frame, pose.child, pose.cov) == ("map", "base_link", None)
         assert pose.x == pytest.approx(10.0 + (stamp - T0), abs=1e-6)
@@ -339,7 +339,7 @@ def test_ros2_laserscan_with_odometry_pose_source(tmp_path: Path) -> None:
     assert len(frames) == 5
     frame, pose = frames[1]
     assert frame.points.shape == (1, 3, 3)
-    np.testing.assert_array_equal(frame.T_base_sensor, np.eye(4))
+    np.testing.assert_allclose(frame.T_base_sensor, np.eye(4), atol=1e-12)
     assert pose is not None
     assert (pose.x, pose.y, pose.yaw) == pytest.approx((1.5, 3.0, 0.15))
     assert (pose.frame, pose.child) == ("odom", "base_footprint")
@@ -375,7 +375,7 @@ def test_odometry_child_frame_bridged_to_base_frame_through_tf(tmp_path: Path) -
     bag = write_bag(tmp_path / "bridge", msgs, records, StoragePlugin.MCAP)
     with BagSource(bag, pose_source="odom", base_frame="base_link") as source:
         ((frame, pose),) = source.frames()
-    np.testing.assert_array_equal(frame.T_base_sensor, np.eye(4))
+    np.testing.assert_allclose(frame.T_base_sensor, np.eye(4), atol=1e-12)
     assert pose is not None
     assert (pose.x, pose.y, pose.yaw, pose.child, pose.cov) == pytest.approx(
         (1.0, 1.0, math.pi / 2, "base_link", None)
@@ -516,7 +516,7 @@ def test_mounting_policies(tmp_path: Path) -> None:
             "using an identity sensor mounting"
         ]
         frame, pose = next(source.frames())
-    np.testing.assert_array_equal(frame.T_base_sensor, np.eye(4))
+    np.testing.assert_allclose(frame.T_base_sensor, np.eye(4), atol=1e-12)
     assert pose is None
     with BagSource(bag, pose_source="none", base_frame="/laser") as source:
         assert source.base_frame == "laser"
@@ -641,8 +641,8 @@ def test_real_bag_with_damaged_index_is_rejected() -> None:
     ("text", "expected"),
     [
         ("tf", PoseSourceSpec("tf", "map", "base_link")),
-        ("tf:odom>base_footprint", PoseSourceSpec("tf", "odom", "base_footprint")),
-        (" tf:/map > /base_link ", PoseSourceSpec("tf", "map", "base_link")),
+        ("tf:odom>base_footprint", PoseSourceSpec("tf", "odom", "base_footprint", named=True)),
+        (" tf:/map > /base_link ", PoseSourceSpec("tf", "map", "base_link", named=True)),
         ("odom", PoseSourceSpec("odom")),
         ("odom:/wheel/odometry", PoseSourceSpec("odom", topic="/wheel/odometry")),
         ("pose", PoseSourceSpec("pose")),
@@ -737,8 +737,8 @@ def test_tum_file(tmp_path: Path) -> None:
     )
     track = load_tum(path)
     np.testing.assert_array_equal(track.stamps, [1.0, 2.0])
-    np.testing.assert_array_equal(track.y, [5.0, 0.0])
-    assert abs(track.yaw[1]) == pytest.approx(math.pi)
+    np.testing.assert_array_equal(track.positions, [[1.0, 5.0, 9.0], [2.0, 0.0, 0.0]])
+    assert abs(track.at(2.0).yaw) == pytest.approx(math.pi)
     assert (track.frame, track.child, track.cov) == ("map", "base_link", None)
     path.write_text("1.0 1 2 3 0 0 0 1\n1.5 1 2 3 0 0 0\n")
     with pytest.raises(
@@ -762,14 +762,16 @@ def test_player_rows_are_the_detectors_rows(tmp_path: Path) -> None:
         sensor="pointcloud",
         camera=Camera(width=48, height=200),
     )
-    how = RowSelection()
+    how = RowSelection(band=(1.3, 2.1))  # a whole cloud would choose its own band otherwise
     assert rows_to_search(how, 200).step == 3
     with BagSource(bag) as source:
         whole = [frame for frame, _ in source.frames()]
         rows = [frame for frame, _ in source.frames(how)]
     assert len(rows) == len(whole) == 6
     for full, row in zip(whole, rows, strict=True):
-        assert row.points.shape == (1, 48, 3)
+        assert row.points.shape == (STACK, 48, 3)
+        assert row.band == how.band
         expected = select_points(full.points, full.T_base_sensor, how)
-        np.testing.assert_array_equal(row.points[0], expected)
+        picked = select_points(row.points, row.T_base_sensor, how, stacked=True)
+        np.testing.assert_array_equal(picked, expected)
         assert np.isfinite(expected).all(axis=1).sum() > 24  # the band is seen: a real check

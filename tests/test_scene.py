@@ -176,7 +176,10 @@ def test_scene_kinds_give_valid_deterministic_plans(name, seed):
     assert all(1.0 <= w.length <= 8.0 or w.length == pillar_face for w in plan.walls)
     relative = (wall_angles_deg(plan) - wall_angles_deg(plan)[0]) % 90.0
     assert np.sum((relative > 10.0) & (relative < 80.0)) >= 3
-    assert all(box.height <= 1.1 for box in plan.furniture)
+    assert all(box.height <= 1.1 for box in plan.furniture if box.base == 0.0)
+    on_counters = [box for box in plan.furniture if box.base > 0.0]  # appliances
+    assert all(box.base == 0.9 and box.height <= 1.35 for box in on_counters)
+    assert bool(on_counters) == (kind.counters > 0)
     assert plan.route[0] == (0.0, 0.0)
     assert clearance(plan, np.column_stack([traj.x, traj.y])).min() >= 0.6
 

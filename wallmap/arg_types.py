@@ -31,3 +31,25 @@ def port(value: str) -> int:
         msg = f"must be a TCP port 0-65535 (0 for any free one), got {value}"
         raise argparse.ArgumentTypeError(msg)
     return number
+
+
+def finite(value: str) -> float:
+    """Any finite number (a height, which may lie below the frame's origin)."""
+    x = float(value)
+    if not math.isfinite(x):
+        msg = f"must be a finite number, got {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return x
+
+
+def intrinsics(value: str) -> tuple[float, float, float, float]:
+    """A pinhole camera as FX,FY,CX,CY in pixels (focal lengths positive)."""
+    try:
+        fx, fy, cx, cy = (float(v) for v in value.split(","))
+    except ValueError:
+        msg = f"expected FX,FY,CX,CY in pixels, got {value!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not all(map(math.isfinite, (fx, fy, cx, cy))) or fx <= 0 or fy <= 0:
+        msg = f"FX,FY must be positive and all four finite, got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return fx, fy, cx, cy

@@ -16,7 +16,7 @@ from typing import NoReturn
 import zenoh
 
 from wallmap import __version__
-from wallmap.arg_types import non_negative, positive
+from wallmap.arg_types import finite, intrinsics, non_negative, positive
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scan_row import RowSelection
@@ -48,6 +48,8 @@ from wallmap.services.odometry import service as odometry_service
 from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.tum_folder import TUM_DEPTH_SCALE, TUM_INTRINSICS
 from wallmap.status import fetch_status, format_status
 from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
@@ -139,8 +141,7 @@ def _cmd_player(args: argparse.Namespace) -> int:
         bag=args.bag,
         rate=args.rate,
         fast=args.fast,
-        pose_source=args.pose_source,
-        sensor_topic=args.sensor_topic,
+        source=_source_options(args),
         wait_for=tuple(filter(None, args.wait_for.split(",")))
         if args.wait_for is not None
         else ("detector", "mapper")
@@ -151,7 +152,6 @@ def _cmd_player(args: argparse.Namespace) -> int:
         start=args.start,
         duration=args.duration,
         loop=args.loop,
-        topics=tuple(filter(None, args.topics.split(","))) if args.topics else None,
         paused=args.paused,
     )
     settings = settings_from_args(args, wait_for_router=args.wait_timeout)
@@ -194,8 +194,8 @@ def _cmd_up(args: argparse.Namespace) -> int:
         bag=args.bag,
         fast=args.fast,
         rate=args.rate,
-        pose_source=args.pose_source,
-        sensor_topic=args.sensor_topic,
+        source=_source_options(args),
+        band=args.band,
         state=args.state,
         exit_when_done=args.exit_when_done,
         json_out=args.json_out,
@@ -204,7 +204,7 @@ def _cmd_up(args: argparse.Namespace) -> int:
         truth=args.truth,
         odometry=args.odometry,
     )
-    if args.odometry and args.pose_source not in ("tf", "none"):
+    if args.odometry and args.pose_source not in (None, "tf", "none"):
         msg = f"--odometry estimates the poses itself; drop --pose-source {args.pose_source}"
         raise PlayerError(msg)
     return up(settings, options)
@@ -250,17 +250,71 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _add_bag_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("bag", type=Path, metavar="BAG", help="ROS 1 .bag file or ROS 2 bag folder")
+    p.add_argument(
+        "bag",
+        type=Path,
+        metavar="BAG",
+        help="ROS 1 .bag file, ROS 2 bag folder, or TUM RGB-D folder (depth.txt, depth/*.png)",
+    )
     speed = p.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=positive, default=1.0, help="speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="as fast as the pipeline takes it")
     p.add_argument(
         "--pose-source",
-        default="tf",
         metavar="SPEC",
-        help="tf | tf:PARENT>CHILD | odom[:TOPIC] | pose[:TOPIC] | tum:FILE | none (default tf)",
+        help="tf | tf:PARENT>CHILD | odom[:TOPIC] | pose[:TOPIC] | tum:FILE | none (default: tf "
+        "for a bag, the folder's groundtruth.txt for a TUM folder)",
     )
     p.add_argument("--sensor-topic", metavar="TOPIC", help="sensor topic, if the bag has several")
+    p.add_argument(
+        "--level",
+        choices=("auto", "none"),
+        default="auto",
+        help="auto (default): level a fixed frame that is not level, and find its floor, from "
+        "the depth data; none: take it as it is, floor at z = 0",
+    )
+    p.add_argument(
+        "--floor-z", type=finite, metavar="Z", help="the floor's height in the fixed frame (m)"
+    )
+    p.add_argument(
+        "--intrinsics",
+        type=intrinsics,
+        default=TUM_INTRINSICS,
+        metavar="FX,FY,CX,CY",
+        help="a TUM folder's camera, pixels (default TUM's 525,525,319.5,239.5)",
+    )
+    p.add_argument(
+        "--depth-scale",
+        type=positive,
+        default=TUM_DEPTH_SCALE,
+        metavar="N",
+        help="a TUM folder's depth units per metre (default 5000; 1000 for millimetres)",
+    )
+
+
+def _add_band_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--band",
+        type=_band,
+        default=None,
+        metavar="LOW,HIGH",
+        help="height band (m above the floor; default: what the sensor sees above furniture, "
+        "at most 1.3-2.1)",
+    )
+
+
+def _source_options(args: argparse.Namespace) -> SourceOptions:
+    return SourceOptions(
+        sensor_topic=args.sensor_topic,
+        pose_source=args.pose_source,
+        topics=tuple(filter(None, args.topics.split(",")))
+        if getattr(args, "topics", None)
+        else None,
+        level=args.level,
+        floor_z=args.floor_z,
+        intrinsics=args.intrinsics,
+        depth_scale=args.depth_scale,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -308,9 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--rows", choices=("band", "row"), default="band", help="row choice (default band)"
     )
-    p.add_argument(
-        "--band", type=_band, default=(1.3, 2.1), metavar="LOW,HIGH", help="height band (m)"
-    )
+    _add_band_argument(p)
     p.add_argument(
         "--row-fraction", type=float, default=0.25, help="row from the top, for --rows row"
     )
@@ -380,6 +432,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("up", help="router + detector + mapper (+ odometry) + player, one machine")
     _add_bag_arguments(p)
+    _add_band_argument(p)
     p.add_argument("--state", type=Path, metavar="FILE", help="the mapper's state file")
     p.add_argument("--exit-when-done", action="store_true", help="stop everything after the bag")
     p.add_argument("--json-out", type=Path, metavar="FILE", help="write the final map as JSON")

@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from wallmap.arg_types import finite, intrinsics, positive
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
 from wallmap.doctor_facts import (
     GAP_LIMIT,
@@ -26,13 +27,19 @@ from wallmap.doctor_facts import (
     SensorFacts,
     TopicFacts,
 )
-from wallmap.doctor_inspect import inspect_bag
+from wallmap.doctor_inspect import inspect_bag, inspect_tum
 from wallmap.services.player.bag_source import (
     CAMERA_INFO,
     IMAGE,
     LASERSCAN,
     POINTCLOUD2,
     TF_TYPES,
+)
+from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.tum_folder import (
+    TUM_DEPTH_SCALE,
+    TUM_INTRINSICS,
+    is_tum_folder,
 )
 
 WIDTH = 100  # columns of the text report
@@ -321,8 +328,25 @@ def _warnings(warnings: list[str]) -> list[str]:
     return _section("player", texts)
 
 
+def _tum_text(report: Report) -> list[str]:
+    """A TUM RGB-D folder: its images, its trajectory, how the player places the frames."""
+    lines = _wrap("folder", report.path)
+    if report.sensor is not None:
+        lines += _sensor(report.sensor)
+    for pose in report.poses:
+        posed = pose.frames_with_pose or 0
+        frames = report.sensor.frames if report.sensor else 0
+        what = f"{posed}/{frames} frames posed" if pose.available else "no poses"
+        lines += _wrap("poses", f"{pose.source}: {what}")
+    if report.placement:
+        lines += _wrap("level", report.placement)
+    return lines
+
+
 def render_text(report: Report) -> str:
     """The report as one screen of plain text (at most about 40 lines of 100 columns)."""
+    if report.file.format == "tum":
+        return "\n".join([*_tum_text(report), *_wrap("verdict", report.verdict.text)])
     lines = _file(report)
     if report.readable:
         lines += _topics(report)
@@ -332,6 +356,8 @@ def render_text(report: Report) -> str:
         lines += _section("chains", [_chain(c) for c in report.tf.chains])
         lines += _poses(report)
         lines += _clocks(report)
+        if report.placement:
+            lines += _wrap("level", report.placement)
         lines += _warnings(report.warnings)
     lines += _wrap("verdict", report.verdict.text)
     return "\n".join(lines)
@@ -345,7 +371,13 @@ def report_json(report: Report) -> str:
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
-    report = inspect_bag(args.bag, args.sensor_topic)
+    if is_tum_folder(args.bag):
+        source = SourceOptions(pose_source=args.pose_source, level=args.level,
+                               floor_z=args.floor_z, intrinsics=args.intrinsics,
+                               depth_scale=args.depth_scale)  # fmt: skip
+        report = inspect_tum(args.bag, source)
+    else:
+        report = inspect_bag(args.bag, args.sensor_topic)
     print(report_json(report) if args.json else render_text(report))
     return report.exit_status
 
@@ -354,10 +386,20 @@ def add_command(sub: Any) -> None:
     """Add ``doctor`` to the ``wallmap`` subcommands (``sub`` from ``add_subparsers``)."""
     p = sub.add_parser("doctor", help="inspect a bag: what the player will use, and what is wrong")
     p.add_argument(
-        "bag", type=Path, metavar="BAG", help="ROS 1 .bag file, ROS 2 bag folder or .mcap file"
+        "bag",
+        type=Path,
+        metavar="BAG",
+        help="ROS 1 .bag file, ROS 2 bag folder, .mcap file or TUM RGB-D folder",
     )
     p.add_argument("--json", action="store_true", help="the same facts as JSON, for scripts")
     p.add_argument(
         "--sensor-topic", metavar="TOPIC", help="the sensor topic you would give the player"
     )
+    tum = p.add_argument_group("TUM RGB-D folders")
+    tum.add_argument("--pose-source", metavar="SPEC", help="tum:FILE or none")
+    tum.add_argument("--level", choices=("auto", "none"), default="auto")
+    tum.add_argument("--floor-z", type=finite, metavar="Z")
+    tum.add_argument("--intrinsics", type=intrinsics, default=TUM_INTRINSICS,
+                     metavar="FX,FY,CX,CY")  # fmt: skip
+    tum.add_argument("--depth-scale", type=positive, default=TUM_DEPTH_SCALE, metavar="N")
     p.set_defaults(func=_cmd_doctor)

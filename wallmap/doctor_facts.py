@@ -164,6 +164,8 @@ class PoseFacts:
         player: ``ok`` when BagSource opens the bag with this pose source, else its error;
             None when not checked (the bag has no sensor topic to open it with).
         warnings: What BagSource assumed with this source (e.g. an identity mounting).
+        placement: How the player places frames with this source: the tilt of the fixed frame
+            and its floor found from the depth data, how sure, and the band the sensor sees.
         frames_with_pose: Sensor frames that get a pose, as the player interpolates them.
         frames_in_gaps: Sensor frames whose pose is interpolated across a gap.
     """
@@ -178,6 +180,7 @@ class PoseFacts:
     gaps: Intervals = field(default_factory=Intervals)
     player: str | None = None
     warnings: list[str] = field(default_factory=list)
+    placement: str | None = None
     frames_with_pose: int | None = None
     frames_in_gaps: int | None = None
 
@@ -234,6 +237,7 @@ class Report:
         poses: Every candidate pose source, the default (tf) first.
         clock: Stamps of the sensor topic and the pose topics.
         warnings: What the player would warn about with the recommended pose source.
+        placement: How the player would place the frames with it (level, floor, band).
         verdict: The conclusion.
     """
 
@@ -249,6 +253,7 @@ class Report:
     poses: list[PoseFacts] = field(default_factory=list)
     clock: list[ClockFacts] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    placement: str | None = None
     verdict: Verdict = field(default_factory=lambda: Verdict("refused", "not inspected"))
 
     @property

@@ -45,6 +45,7 @@ from wallmap.doctor_facts import (
     Verdict,
 )
 from wallmap.services.player.bag_source import (
+    FIXED_FRAMES,
     IMAGE,
     LASERSCAN,
     POINTCLOUD2,
@@ -56,6 +57,8 @@ from wallmap.services.player.bag_source import (
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages
 from wallmap.services.player.pose_sources import PoseTrack
+from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
 
 # Clouds and images are big: their share of invalid points is measured on the first few.
 INVALID_SAMPLE = 5
@@ -389,23 +392,30 @@ def _player_sensor(path: Path, requested: str | None) -> tuple[SensorFacts, list
 # --- pose sources -------------------------------------------------------------------------------
 
 
-def _player_accepts(path: Path, sensor: str, spec: str) -> tuple[str, list[str]]:
-    """Whether BagSource opens the bag with this pose source ("ok"), and its warnings."""
+def _player_accepts(path: Path, sensor: str, spec: str) -> tuple[str, list[str], str | None]:
+    """Whether BagSource opens the bag with this pose source ("ok"), and what it says.
+
+    Returns the acceptance, the warnings, and how the player places the frames (the level of
+    the fixed frame, its floor, the band the sensor sees).
+    """
     try:
         with BagSource(path, sensor_topic=sensor, pose_source=spec) as source:
-            return "ok", list(source.warnings)
+            return "ok", list(source.warnings), source.placement.describe() or None
     except PlayerError as err:
-        return str(err), []
+        return str(err), [], None
 
 
-def _tf_pose(bag: _Contents, parent: str, stamps: np.ndarray, t0: float) -> PoseFacts:
+def _tf_pose(
+    bag: _Contents, parent: str, stamps: np.ndarray, t0: float, child: str = DEFAULT_CHILD
+) -> PoseFacts:
     """Coverage of a tf pose source, as the player's lookups with its tolerance answer it.
 
     The span and gaps are those of the chain's dynamic links: where any link has no sample, the
     pose is interpolated (or, at the ends, not there).
     """
-    facts = PoseFacts(f"tf:{parent}>{DEFAULT_CHILD}", parent == DEFAULT_PARENT, available=False)
-    chain = bag.chain(parent, DEFAULT_CHILD)
+    default = parent == DEFAULT_PARENT and child == DEFAULT_CHILD
+    facts = PoseFacts(f"tf:{parent}>{child}", default, available=False)
+    chain = bag.chain(parent, child)
     if not chain.found:
         facts.reason = chain.reason
         return facts
@@ -422,7 +432,7 @@ def _tf_pose(bag: _Contents, parent: str, stamps: np.ndarray, t0: float) -> Pose
         answered = 0
         for stamp in stamps:
             try:
-                bag.tf.lookup(parent, DEFAULT_CHILD, float(stamp), tolerance=POSE_TOLERANCE)
+                bag.tf.lookup(parent, child, float(stamp), tolerance=POSE_TOLERANCE)
             except TfError:
                 continue
             answered += 1
@@ -571,10 +581,13 @@ def inspect_bag(path: Path, sensor_topic: str | None = None) -> Report:
     if sensor.topic is not None:
         for pose in report.poses:
             if pose.available or pose.default:  # the default's refusal is what `up` would say
-                pose.player, pose.warnings = _player_accepts(path, sensor.topic, pose.source)
+                pose.player, pose.warnings, pose.placement = _player_accepts(
+                    path, sensor.topic, pose.source
+                )
     report.verdict, chosen = _verdict(report, sensor_topic)
     # What the player would warn about when run as recommended (with no poses: as `none`).
     report.warnings = chosen.warnings if chosen is not None else player_warnings
+    report.placement = chosen.placement if chosen is not None else None
     return report
 
 
@@ -623,6 +636,16 @@ def _fill(report: Report, bag: _Contents, sensor: SensorFacts, reader: AnyReader
     report.poses = [_tf_pose(bag, DEFAULT_PARENT, stamps, t0)]
     if "odom" in bag.tf.frames:
         report.poses.append(_tf_pose(bag, "odom", stamps, t0))
+    # A handheld camera or a SLAM: the fixed frame straight to the frame carrying the sensor.
+    sensor_frame = next(iter(sensor.frame_ids), None)
+    for fixed in FIXED_FRAMES:
+        moving = bag.tf.moving_frame(fixed, sensor_frame) if sensor_frame else None
+        if (
+            moving is not None
+            and moving != DEFAULT_CHILD
+            and not bag.tf.has_path(fixed, DEFAULT_CHILD)
+        ):
+            report.poses.append(_tf_pose(bag, fixed, stamps, t0, moving))
     topics = sorted(bag.poses, key=lambda topic: bag.topics[topic].msgtype != ODOMETRY_TYPE)
     report.poses += [_topic_pose(bag, topic, stamps, t0) for topic in topics]
 
@@ -630,3 +653,47 @@ def _fill(report: Report, bag: _Contents, sensor: SensorFacts, reader: AnyReader
     report.clock = [_clock(topic, s, t0, bag_start) for topic, s in bag.streams.items()]
     if sensor.topic is not None:  # the sensor first
         report.clock.sort(key=lambda c: c.topic != sensor.topic)
+
+
+def inspect_tum(path: Path, source: SourceOptions) -> Report:
+    """Inspect a TUM RGB-D folder as the player would open it (``source``: its camera, poses)."""
+    files = [f for f in path.rglob("*") if f.is_file()]
+    report = Report(path=str(path), file=FileFacts(sum(f.stat().st_size for f in files), "",
+                                                    "tum", name_matches=True))  # fmt: skip
+    try:
+        folder = TumFolder(
+            path, pose_source=source.pose_source, intrinsics=source.intrinsics,
+            depth_scale=source.depth_scale, level=source.level, floor_z=source.floor_z,
+        )  # fmt: skip
+    except PlayerError as err:
+        return _refuse(report, str(err))
+    report.readable = True
+    stamps = np.array([stamp for stamp, _ in folder.entries])
+    report.start, report.duration = float(stamps[0]), folder.duration
+    report.t0 = float(stamps[0])
+    steps = np.diff(stamps)
+    height, width = folder.size
+    report.sensor = SensorFacts(
+        "depth.txt", SENSOR_TYPE, "the folder's depth images", frames=len(stamps),
+        rate_hz=round(1.0 / float(np.median(steps)), 3) if steps.size else None,
+        frame_ids={OPTICAL_FRAME: len(stamps)},
+        geometry={"width": width, "height": height, "encoding": f"PNG / {source.depth_scale:g}"},
+    )  # fmt: skip
+    spec = str(folder.pose_spec)
+    pose = PoseFacts(spec, default=True, available=folder.pose_spec.kind == "tum", player="ok")
+    if pose.available:
+        posed = sum(folder.pose_at(float(s)) is not None for s in stamps)
+        pose.frames_with_pose, pose.placement = posed, folder.placement.describe() or None
+    report.poses, report.placement = [pose], pose.placement
+    camera = ["--intrinsics", ",".join(f"{v:g}" for v in source.intrinsics)]
+    camera += ["--depth-scale", f"{source.depth_scale:g}"]
+    command = _up(str(path), *camera, *(() if pose.default else ("--pose-source", spec)))
+    if not pose.available or not pose.frames_with_pose:
+        report.verdict = Verdict("no-poses", f"no poses: give --pose-source tum:FILE (`{command}`)")
+    elif pose.frames_with_pose >= READY_SHARE * len(stamps):
+        report.verdict = Verdict("ready", f"ready: `{command}`", command)
+    else:
+        share = pose.frames_with_pose / len(stamps)
+        text = f"partly posed: {share:.0%} of frames get a pose from {spec} (`{command}`)"
+        report.verdict = Verdict("partial-poses", text, command)
+    return report

@@ -15,7 +15,7 @@ import socket
 import subprocess
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -25,6 +25,7 @@ from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import fetch_map, format_table, to_json
 from wallmap.plot import write_picture
+from wallmap.services.player.sources import SourceOptions
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
 
@@ -36,8 +37,8 @@ class UpOptions:
     bag: Path
     fast: bool = False
     rate: float = 1.0
-    pose_source: str = "tf"
-    sensor_topic: str | None = None
+    source: SourceOptions = field(default_factory=SourceOptions)
+    band: tuple[float, float] | None = None
     state: Path | None = None
     exit_when_done: bool = False
     json_out: Path | None = None
@@ -45,6 +46,21 @@ class UpOptions:
     min_obs: int = 3
     truth: Path | None = None
     odometry: bool = False  # poses from the scans (wallmap odometry), for bags without poses
+
+
+def source_flags(source: SourceOptions) -> list[str]:
+    """The player's command-line flags that read a recording as ``source`` says."""
+    flags = ["--level", source.level]
+    if source.pose_source is not None:
+        flags += ["--pose-source", source.pose_source]
+    if source.sensor_topic is not None:
+        flags += ["--sensor-topic", source.sensor_topic]
+    if source.topics is not None:
+        flags += ["--topics", ",".join(source.topics)]
+    if source.floor_z is not None:
+        flags += ["--floor-z", repr(source.floor_z)]
+    flags += ["--intrinsics", ",".join(repr(v) for v in source.intrinsics)]
+    return [*flags, "--depth-scale", repr(source.depth_scale)]
 
 
 def free_loopback_port() -> int:
@@ -125,17 +141,20 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
     env = {**os.environ, "WALLMAP_LOG": os.environ.get("WALLMAP_LOG", "WARNING")}
     mapper_args = ["mapper", *common] + (["--state", str(options.state)] if options.state else [])
     speed = ["--fast"] if options.fast else ["--rate", str(options.rate)]
-    pose_source = "none" if options.odometry else options.pose_source
+    source = options.source
+    if options.odometry:
+        source = replace(source, pose_source="none")
     services = ["detector", "mapper"] + (["odometry"] if options.odometry else [])
-    player_args = ["player", str(options.bag), *speed, "--pose-source", pose_source]
+    player_args = ["player", str(options.bag), *speed, *source_flags(source)]
     player_args += ["--wait-for", ",".join(services), *common]
-    if options.sensor_topic:
-        player_args += ["--sensor-topic", options.sensor_topic]
+    detector_args = ["detector", *common]
+    if options.band is not None:
+        detector_args += ["--band", f"{options.band[0]},{options.band[1]}"]
     stop = stop_on_signals()
     with _processes(env) as procs:
         procs.start("router", "router", "--listen", endpoint, "--prefix", settings.prefix)
         procs.start("mapper", *mapper_args)
-        procs.start("detector", "detector", *common)
+        procs.start("detector", *detector_args)
         if options.odometry:
             procs.start("odometry", "odometry", *common)
         player = procs.start("player", *player_args)

@@ -39,6 +39,7 @@ GAP_COLOUR = "#d9908a"
 TRAJECTORY_COLOUR = "#2b6cb0"
 LABEL_COLOUR = "#202020"
 SCALE_COLOUR = "#000000"
+POINT_COLOUR = "#b8b8b8"
 
 _PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # +90 degrees
 
@@ -225,7 +226,11 @@ def _scale_bar_length(scale: float, width: int) -> float:
 
 
 def render_map(
-    reply: dict[str, Any], *, trajectory: Array | None = None, size: int = 1000
+    reply: dict[str, Any],
+    *,
+    trajectory: Array | None = None,
+    size: int = 1000,
+    points: Array | None = None,
 ) -> Drawing:
     """Lay out a map reply as a picture whose longer side is about ``size`` pixels.
 
@@ -234,10 +239,13 @@ def render_map(
         trajectory: (N, 2) x, y or (N, 4) stamp, x, y, yaw in the map frame; by default the
             reply's own ``trajectory``, if it has one.
         size: pixels of the longer side; line widths and text scale with it.
+        points: (N, 2) sensor points in the map frame, drawn grey under the walls (what the
+            map should cover), one square per pixel they fall in.
     """
     walls = [_wall_geometry(w) for w in reply.get("walls", [])]
     path = _trajectory_xy(reply, trajectory)
-    content = [path, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
+    cloud = np.zeros((0, 2)) if points is None else np.asarray(points, dtype=float)
+    content = [path, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
     everything = np.vstack([c.reshape(-1, 2) for c in content])
     if len(everything) == 0:
         everything = np.array([[-1.0, -1.0], [1.0, 1.0]])
@@ -258,6 +266,10 @@ def render_map(
     unit = size / 1000  # line widths and text grow with the picture
     items = drawing.items
     px = drawing.to_px
+    if len(cloud):
+        pixels = np.unique(np.floor(px(cloud)).astype(np.int64), axis=0)
+        square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]) * max(1.0, unit)
+        items.extend(Fill(p + square, POINT_COLOUR, 1.0, "points") for p in pixels)
     for w in walls:
         items.extend(Fill(px(b), WALL_COLOUR, BAND_OPACITY, "band") for b in w.bands)
     for w in walls:
@@ -530,23 +542,36 @@ def encode_png(image: Array) -> bytes:
 
 
 def write_png(
-    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+    path: Path,
+    reply: dict[str, Any],
+    trajectory: Array | None = None,
+    size: int = 1000,
+    points: Array | None = None,
 ) -> None:
     """Draw a map reply to a PNG file (see ``render_map``)."""
-    Path(path).write_bytes(render_map(reply, trajectory=trajectory, size=size).to_png())
+    drawing = render_map(reply, trajectory=trajectory, size=size, points=points)
+    Path(path).write_bytes(drawing.to_png())
 
 
 def write_svg(
-    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+    path: Path,
+    reply: dict[str, Any],
+    trajectory: Array | None = None,
+    size: int = 1000,
+    points: Array | None = None,
 ) -> None:
     """Draw a map reply to an SVG file (see ``render_map``)."""
-    svg = render_map(reply, trajectory=trajectory, size=size).to_svg()
+    svg = render_map(reply, trajectory=trajectory, size=size, points=points).to_svg()
     Path(path).write_text(svg, encoding="utf-8")
 
 
 def write_picture(
-    path: Path, reply: dict[str, Any], trajectory: Array | None = None, size: int = 1000
+    path: Path,
+    reply: dict[str, Any],
+    trajectory: Array | None = None,
+    size: int = 1000,
+    points: Array | None = None,
 ) -> None:
     """PNG or SVG by the file's suffix (.png, else SVG), for commands taking one ``--out``."""
     writer = write_png if Path(path).suffix.lower() == ".png" else write_svg
-    writer(path, reply, trajectory, size)
+    writer(path, reply, trajectory, size, points)

@@ -33,7 +33,9 @@ from .floorplan import (
     clearance,
     generate_floorplan,
     smooth_route,
+    with_counters,
 )
+from .handheld import Handheld, HandheldStyle, write_handheld_recording
 from .kinds import SCENE_KINDS, SceneKind
 from .render import (
     Camera,
@@ -74,6 +76,8 @@ __all__ = [
     "Camera",
     "FloorPlan",
     "Furniture",
+    "Handheld",
+    "HandheldStyle",
     "Layout",
     "Scanner",
     "SceneInfo",
@@ -95,6 +99,8 @@ __all__ = [
     "stamp_to_ns",
     "truth_path_for",
     "walls_seen",
+    "with_counters",
+    "write_handheld_recording",
     "write_scene_bag",
     "write_tum",
 ]

@@ -121,7 +121,7 @@ def truth_path_for(path: str | Path) -> Path:
     return Path(str(Path(path)) + ".truth.json")
 
 
-class _BagSink:
+class BagSink:
     """One bag writer, ROS 1 or ROS 2, behind a format-independent interface."""
 
     def __init__(self, path: Path, fmt: BagFormat, *, compress: bool = False) -> None:
@@ -144,7 +144,7 @@ class _BagSink:
         self.types = self.typestore.types
         self._seq: dict[str, int] = {}
 
-    def __enter__(self) -> _BagSink:
+    def __enter__(self) -> BagSink:
         self.writer.open()
         return self
 
@@ -152,6 +152,7 @@ class _BagSink:
         self.writer.close()
 
     def topic(self, name: str, msgtype: str, *, latched: bool = False) -> Connection:
+        """A new topic; ``latched`` as tf_static is (ROS 1 latching, ROS 2 transient local)."""
         if isinstance(self.writer, Writer1):
             return self.writer.add_connection(
                 name, msgtype, typestore=self.typestore, latching=1 if latched else None
@@ -189,6 +190,7 @@ class _BagSink:
         return header_type(seq=seq, stamp=stamp, frame_id=frame_id)
 
     def write(self, connection: Connection, stamp_ns: int, msg: object) -> None:
+        """Serialize a message for the bag's ROS version and write it at ``stamp_ns``."""
         if self.ros1:
             data = self.typestore.serialize_ros1(msg, connection.msgtype)
         else:
@@ -196,7 +198,7 @@ class _BagSink:
         self.writer.write(connection, stamp_ns, data)
 
 
-def _sub_seeds(seed: int, n: int) -> list[int]:
+def sub_seeds(seed: int, n: int) -> list[int]:
     """Independent seeds for the parts of a scene, all derived from one."""
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
@@ -206,14 +208,14 @@ def _se2(x: float, y: float, yaw: float) -> np.ndarray:
     return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
 
 
-def _yaw_quaternion(sink: _BagSink, yaw: float) -> Any:
+def _yaw_quaternion(sink: BagSink, yaw: float) -> Any:
     return sink.types["geometry_msgs/msg/Quaternion"](
         x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
     )
 
 
-def _transform(
-    sink: _BagSink,
+def transform_stamped(
+    sink: BagSink,
     topic: str,
     stamp_ns: int,
     parent: str,
@@ -221,6 +223,7 @@ def _transform(
     xyz: tuple[float, float, float],
     quaternion: tuple[float, float, float, float],
 ) -> Any:
+    """A geometry_msgs/TransformStamped parent <- child."""
     t = sink.types
     return t["geometry_msgs/msg/TransformStamped"](
         header=sink.header(topic, stamp_ns, parent),
@@ -235,10 +238,10 @@ def _transform(
 
 
 def _planar_transform(
-    sink: _BagSink, stamp_ns: int, parent: str, child: str, pose: np.ndarray
+    sink: BagSink, stamp_ns: int, parent: str, child: str, pose: np.ndarray
 ) -> Any:
     yaw = math.atan2(pose[1, 0], pose[0, 0])
-    return _transform(
+    return transform_stamped(
         sink,
         TF_TOPIC,
         stamp_ns,
@@ -249,15 +252,16 @@ def _planar_transform(
     )
 
 
-def _tf_message(sink: _BagSink, *transforms: Any) -> Any:
+def tf_message(sink: BagSink, *transforms: Any) -> Any:
+    """A tf2_msgs/TFMessage of some transforms."""
     return sink.types["tf2_msgs/msg/TFMessage"](transforms=list(transforms))
 
 
-def _camera_static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
+def _camera_static_tf(sink: BagSink, stamp_ns: int, camera: Camera) -> Any:
     half = math.radians(-camera.tilt_deg) / 2  # rotation about y, see Camera.R_base_link
-    return _tf_message(
+    return tf_message(
         sink,
-        _transform(
+        transform_stamped(
             sink,
             TF_STATIC_TOPIC,
             stamp_ns,
@@ -266,7 +270,7 @@ def _camera_static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
             camera.mount_xyz,
             (0.0, math.sin(half), 0.0, math.cos(half)),
         ),
-        _transform(
+        transform_stamped(
             sink,
             TF_STATIC_TOPIC,
             stamp_ns,
@@ -278,10 +282,10 @@ def _camera_static_tf(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
     )
 
 
-def _laser_static_tf(sink: _BagSink, stamp_ns: int, scanner: Scanner) -> Any:
-    return _tf_message(
+def _laser_static_tf(sink: BagSink, stamp_ns: int, scanner: Scanner) -> Any:
+    return tf_message(
         sink,
-        _transform(
+        transform_stamped(
             sink,
             TF_STATIC_TOPIC,
             stamp_ns,
@@ -293,7 +297,7 @@ def _laser_static_tf(sink: _BagSink, stamp_ns: int, scanner: Scanner) -> Any:
     )
 
 
-def _pose(sink: _BagSink, x: float, y: float, yaw: float) -> Any:
+def _pose(sink: BagSink, x: float, y: float, yaw: float) -> Any:
     t = sink.types
     return t["geometry_msgs/msg/Pose"](
         position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
@@ -302,7 +306,7 @@ def _pose(sink: _BagSink, x: float, y: float, yaw: float) -> Any:
 
 
 def _odometry(
-    sink: _BagSink, stamp_ns: int, pose: tuple[float, float, float], twist: np.ndarray
+    sink: BagSink, stamp_ns: int, pose: tuple[float, float, float], twist: np.ndarray
 ) -> Any:
     t = sink.types
     # Planar odometry: tight in x, y, yaw; the unused dimensions get a huge variance.
@@ -323,7 +327,7 @@ def _odometry(
     )
 
 
-def _amcl_pose(sink: _BagSink, stamp_ns: int, pose: tuple[float, float, float]) -> Any:
+def _amcl_pose(sink: BagSink, stamp_ns: int, pose: tuple[float, float, float]) -> Any:
     t = sink.types
     return t["geometry_msgs/msg/PoseWithCovarianceStamped"](
         header=sink.header(AMCL_POSE_TOPIC, stamp_ns, MAP_FRAME),
@@ -342,7 +346,7 @@ def _body_twist(odom: Trajectory) -> np.ndarray:
     return np.stack([c * vx + s * vy, -s * vx + c * vy, yaw_rate], axis=1)
 
 
-def _point_cloud(sink: _BagSink, stamp_ns: int, depth: np.ndarray, camera: Camera) -> Any:
+def _point_cloud(sink: BagSink, stamp_ns: int, depth: np.ndarray, camera: Camera) -> Any:
     t = sink.types
     cloud = np.zeros(depth.size, dtype=CLOUD_DTYPE)
     points = depth_to_points(depth, camera).reshape(-1, 3)
@@ -366,16 +370,22 @@ def _point_cloud(sink: _BagSink, stamp_ns: int, depth: np.ndarray, camera: Camer
     )
 
 
-def _depth_image(
-    sink: _BagSink, stamp_ns: int, depth: np.ndarray, camera: Camera, sensor: SensorKind
+def depth_image(
+    sink: BagSink,
+    stamp_ns: int,
+    depth: np.ndarray,
+    camera: Camera,
+    sensor: SensorKind,
+    frame: str = OPTICAL_FRAME,
 ) -> Any:
+    """A depth sensor_msgs/Image (16UC1 millimetres, or 32FC1 metres) of depths in metres."""
     if sensor == "depth16":
         millimetres = np.clip(np.nan_to_num(np.round(depth * 1000.0)), 0, 65535)
         pixels, encoding = millimetres.astype("<u2"), "16UC1"
     else:
         pixels, encoding = depth.astype("<f4"), "32FC1"
     return sink.types["sensor_msgs/msg/Image"](
-        header=sink.header(IMAGE_TOPIC, stamp_ns, OPTICAL_FRAME),
+        header=sink.header(IMAGE_TOPIC, stamp_ns, frame),
         height=camera.height,
         width=camera.width,
         encoding=encoding,
@@ -386,7 +396,7 @@ def _depth_image(
 
 
 def _laser_scan(
-    sink: _BagSink, stamp_ns: int, ranges: np.ndarray, scanner: Scanner, rate_hz: float
+    sink: BagSink, stamp_ns: int, ranges: np.ndarray, scanner: Scanner, rate_hz: float
 ) -> Any:
     # REP 117: +inf is "nothing within range"; the renderer's NaN means just that here.
     return sink.types["sensor_msgs/msg/LaserScan"](
@@ -403,14 +413,15 @@ def _laser_scan(
     )
 
 
-def _camera_info(sink: _BagSink, stamp_ns: int, camera: Camera) -> Any:
+def camera_info(sink: BagSink, stamp_ns: int, camera: Camera, frame: str = OPTICAL_FRAME) -> Any:
+    """The sensor_msgs/CameraInfo of a pinhole camera without distortion."""
     t = sink.types
     projection = np.hstack([camera.K, np.zeros((3, 1))]).ravel()
     # ROS 1 spells the matrices in capitals, ROS 2 in lower case.
     names = ("D", "K", "R", "P") if sink.ros1 else ("d", "k", "r", "p")
     matrices = (np.zeros(5), camera.K.ravel(), np.eye(3).ravel(), projection)
     return t["sensor_msgs/msg/CameraInfo"](
-        header=sink.header(CAMERA_INFO_TOPIC, stamp_ns, OPTICAL_FRAME),
+        header=sink.header(CAMERA_INFO_TOPIC, stamp_ns, frame),
         height=camera.height,
         width=camera.width,
         distortion_model="plumb_bob",
@@ -478,7 +489,7 @@ def write_scene_bag(
     camera = Camera() if camera is None else camera
     scanner = Scanner() if scanner is None else scanner
     plan = generate_floorplan(seed) if plan is None else plan
-    traj_seed, odom_seed, noise_seed = _sub_seeds(seed, 3)
+    traj_seed, odom_seed, noise_seed = sub_seeds(seed, 3)
 
     # Sampled at twice the sensor rate: even samples are sensor frames, odd ones are the
     # extra odom → base_link transforms between them.
@@ -492,7 +503,7 @@ def write_scene_bag(
     rng = np.random.default_rng(noise_seed)
     seen_counts = {w.id: 0 for w in plan.walls}
 
-    with _BagSink(path, fmt, compress=compress) as sink:
+    with BagSink(path, fmt, compress=compress) as sink:
         tf_static = sink.topic(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True)
         tf = sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage")
         odom_conn = sink.topic(ODOM_TOPIC, "nav_msgs/msg/Odometry")
@@ -517,9 +528,9 @@ def write_scene_bag(
             if k % _MAP_ODOM_EVERY == 0 or k == len(stamps_ns) - 1:
                 map_odom = _se2(*fine.pose_at(k)) @ np.linalg.inv(odom_pose)
                 msg = _planar_transform(sink, stamp_ns, MAP_FRAME, ODOM_FRAME, map_odom)
-                sink.write(tf, stamp_ns, _tf_message(sink, msg))
+                sink.write(tf, stamp_ns, tf_message(sink, msg))
             msg = _planar_transform(sink, stamp_ns, ODOM_FRAME, BASE_FRAME, odom_pose)
-            sink.write(tf, stamp_ns, _tf_message(sink, msg))
+            sink.write(tf, stamp_ns, tf_message(sink, msg))
             if k % 2:
                 continue
 
@@ -546,9 +557,9 @@ def write_scene_bag(
                     cloud = _point_cloud(sink, stamp_ns, depth, camera)
                     sink.write(sensor_conn, stamp_ns, cloud)
                 else:
-                    image = _depth_image(sink, stamp_ns, depth, camera, sensor)
+                    image = depth_image(sink, stamp_ns, depth, camera, sensor)
                     sink.write(sensor_conn, stamp_ns, image)
-                    sink.write(info_conn, stamp_ns, _camera_info(sink, stamp_ns, camera))
+                    sink.write(info_conn, stamp_ns, camera_info(sink, stamp_ns, camera))
             for wall_id in seen:
                 seen_counts[wall_id] += 1
 

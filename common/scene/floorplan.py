@@ -52,19 +52,21 @@ class Wall:
 
 @dataclass(frozen=True)
 class Furniture:
-    """A box standing on the floor, lower than the detector's height band.
+    """A box standing on the floor (or on another box: an appliance on a counter).
 
     Attributes:
         center: Footprint centre (x, y) in the map frame.
         size: Footprint (w, d): w along the box's yaw direction, d across it.
         yaw: Orientation of the footprint in radians.
         height: Top of the box above the floor.
+        base: Bottom of the box above the floor (0: it stands on the floor).
     """
 
     center: Point
     size: tuple[float, float]
     yaw: float
     height: float
+    base: float = 0.0
 
     def corners(self) -> np.ndarray:
         """Footprint corners, (4, 2), counter-clockwise."""
@@ -103,6 +105,7 @@ class FloorPlan:
                     "size": list(f.size),
                     "yaw": f.yaw,
                     "height": f.height,
+                    **({"base": f.base} if f.base else {}),
                 }
                 for f in self.furniture
             ],
@@ -129,6 +132,7 @@ class FloorPlan:
                     size=_point(f["size"]),
                     yaw=float(f["yaw"]),
                     height=float(f["height"]),
+                    base=float(f.get("base", 0.0)),
                 )
                 for f in data["furniture"]
             ),
@@ -650,6 +654,7 @@ def _transform_plan(plan: FloorPlan, angle: float, origin: np.ndarray) -> FloorP
                 size=f.size,
                 yaw=math.remainder(f.yaw + angle, 2 * math.pi),
                 height=f.height,
+                base=f.base,
             )
             for f in plan.furniture
         ),
@@ -712,3 +717,45 @@ def generate_floorplan(
             angle = float(rng.uniform(-math.pi, math.pi))
             return _transform_plan(strip, angle, np.asarray(strip.route[0]))
     raise RuntimeError(f"no valid floor plan found for seed {seed}")
+
+
+COUNTER_HEIGHT = 0.9  # m: a kitchen counter's top
+
+
+def with_counters(plan: FloorPlan, seed: int, counters: int = 3) -> FloorPlan:
+    """The plan with kitchen counters along some walls and appliances standing on them.
+
+    A counter is a box 0.9 m high and 0.6 m deep, 5 cm off a wall, on the side the route
+    passes; two to four appliances (kettles, toasters, microwaves: 0.2 to 0.45 m tall, 0.25 to
+    0.5 m wide) stand on it against the wall. Clutter that rises into a handheld camera's band
+    but is no wall. Counters that would block the route are not placed.
+    """
+    rng = np.random.default_rng(seed)
+    curve = smooth_route(plan.route)
+    furniture = list(plan.furniture)
+    walls = [w for w in plan.walls if not w.glass and w.length >= 1.6]
+    for _ in range(counters if walls else 0):
+        for _ in range(30):
+            wall = walls[int(rng.integers(len(walls)))]
+            p, q = np.array(wall.p0), np.array(wall.p1)
+            direction = (q - p) / np.linalg.norm(q - p)
+            normal = np.array([-direction[1], direction[0]])
+            middle = (p + q) / 2
+            if (curve[np.argmin(np.linalg.norm(curve - middle, axis=1))] - middle) @ normal < 0:
+                normal = -normal  # the side the route passes
+            width = min(2.4, 0.8 * wall.length)
+            foot = p + rng.uniform(width / 2, wall.length - width / 2) * direction
+            yaw = math.atan2(direction[1], direction[0])
+            counter = Furniture(_point(foot + normal * 0.35), (width, 0.6), yaw, COUNTER_HEIGHT)
+            if not _box_fits(FloorPlan(walls=plan.walls, furniture=(*furniture, counter)),
+                             counter, curve):  # fmt: skip
+                continue
+            furniture.append(counter)
+            slots = np.linspace(-width / 2, width / 2, int(rng.integers(2, 5)) + 2)[1:-1]
+            for along in slots:
+                size = (float(rng.uniform(0.25, 0.5)), float(rng.uniform(0.25, 0.45)))
+                centre = foot + along * direction + normal * (0.07 + size[1] / 2)
+                height = COUNTER_HEIGHT + float(rng.uniform(0.2, 0.45))
+                furniture.append(Furniture(_point(centre), size, yaw, height, COUNTER_HEIGHT))
+            break
+    return FloorPlan(plan.walls, tuple(furniture), plan.ceiling_height, plan.route)

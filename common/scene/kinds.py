@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .floorplan import FloorPlan, Layout, generate_floorplan
+from .floorplan import FloorPlan, Layout, generate_floorplan, with_counters
 from .render import Camera
 
 
@@ -23,6 +23,7 @@ class SceneKind:
         glass_fraction: Share of walls that are glass.
         furniture_per_room: Boxes per room, all below the detector's height band.
         pillars_per_room: Free-standing 0.3 m pillars per room (four short walls each).
+        counters: Kitchen counters with appliances on them, along walls (``with_counters``).
         camera: Depth camera and mount.
     """
 
@@ -32,17 +33,19 @@ class SceneKind:
     glass_fraction: float = 0.15
     furniture_per_room: int = 2
     pillars_per_room: int = 0
+    counters: int = 0
     camera: Camera = field(default_factory=Camera)
 
     def plan(self, seed: int) -> FloorPlan:
         """The plan of this kind for ``seed``; the same seed always gives the same plan."""
-        return generate_floorplan(
+        plan = generate_floorplan(
             seed,
             layout=self.layout,
             glass_fraction=self.glass_fraction,
             furniture_per_room=self.furniture_per_room,
             pillars_per_room=self.pillars_per_room,
         )
+        return with_counters(plan, seed, self.counters) if self.counters else plan
 
 
 SCENE_KINDS: dict[str, SceneKind] = {
@@ -59,6 +62,11 @@ SCENE_KINDS: dict[str, SceneKind] = {
         ),
         SceneKind(
             "tilted", "default plan, camera tilted up 8 degrees", camera=Camera(tilt_deg=8.0)
+        ),
+        SceneKind(
+            "kitchen",
+            "counters along the walls with appliances standing on them, up to 1.35 m",
+            counters=4,
         ),
         SceneKind(
             "noisy",

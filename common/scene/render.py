@@ -163,7 +163,8 @@ class _Geometry:
 
     seg_a: np.ndarray  # (M, 2) segment starts
     seg_e: np.ndarray  # (M, 2) segment vectors
-    seg_top: np.ndarray  # (M,) height of the quad above the floor
+    seg_top: np.ndarray  # (M,) height of the quad's top above the floor
+    seg_bottom: np.ndarray  # (M,) and of its bottom
     seg_label: np.ndarray  # (M,) wall id, -1 for furniture
     seg_glass: np.ndarray  # (M,) glass walls return nothing
     box_center: np.ndarray  # (F, 2)
@@ -177,6 +178,7 @@ def _geometry(plan: FloorPlan) -> _Geometry:
     starts = [w.p0 for w in plan.walls]
     ends = [w.p1 for w in plan.walls]
     tops = [w.height for w in plan.walls]
+    bottoms = [0.0] * len(plan.walls)
     labels = [w.id for w in plan.walls]
     glass = [w.glass for w in plan.walls]
     for box in plan.furniture:
@@ -184,6 +186,7 @@ def _geometry(plan: FloorPlan) -> _Geometry:
         starts.extend(corners.tolist())
         ends.extend(np.roll(corners, -1, axis=0).tolist())
         tops.extend([box.height] * 4)
+        bottoms.extend([box.base] * 4)
         labels.extend([-1] * 4)
         glass.extend([False] * 4)
     a = np.array(starts, dtype=float).reshape(-1, 2)
@@ -191,6 +194,7 @@ def _geometry(plan: FloorPlan) -> _Geometry:
         seg_a=a,
         seg_e=np.array(ends, dtype=float).reshape(-1, 2) - a,
         seg_top=np.array(tops, dtype=float),
+        seg_bottom=np.array(bottoms, dtype=float),
         seg_label=np.array(labels, dtype=np.int32),
         seg_glass=np.array(glass, dtype=bool),
         box_center=np.array([b.center for b in plan.furniture], dtype=float).reshape(-1, 2),
@@ -203,9 +207,14 @@ def _geometry(plan: FloorPlan) -> _Geometry:
 
 
 def _nearest_vertical(
-    origin: np.ndarray, rays: np.ndarray, a: np.ndarray, e: np.ndarray, top: np.ndarray
+    origin: np.ndarray,
+    rays: np.ndarray,
+    a: np.ndarray,
+    e: np.ndarray,
+    top: np.ndarray,
+    bottom: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest hit of each ray on vertical quads (segment x [0, top]): (t, segment index)."""
+    """Nearest hit of each ray on vertical quads (segment x [bottom, top]): (t, segment)."""
     rx, ry, rz = rays[:, 0:1], rays[:, 1:2], rays[:, 2:3]
     wx, wy = a[:, 0] - origin[0], a[:, 1] - origin[1]
     ex, ey = e[:, 0], e[:, 1]
@@ -214,7 +223,7 @@ def _nearest_vertical(
         t = (wx * ey - wy * ex) * inv
         s = (wx * ry - wy * rx) * inv
         z = origin[2] + t * rz
-        hit = (t > 1e-9) & (s >= 0.0) & (s <= 1.0) & (z >= 0.0) & (z <= top)
+        hit = (t > 1e-9) & (s >= 0.0) & (s <= 1.0) & (z >= bottom) & (z <= top)
     t = np.where(hit, t, np.inf)
     index = np.argmin(t, axis=1)
     return t[np.arange(len(t)), index], index
@@ -252,9 +261,10 @@ def _cast_vertical(
     glass = np.zeros(n, dtype=bool)
     if len(keep):
         a, e, top = geo.seg_a[keep], geo.seg_e[keep], geo.seg_top[keep]
+        bottom = geo.seg_bottom[keep]
         for start in range(0, n, _CHUNK_RAYS):
             chunk = slice(start, start + _CHUNK_RAYS)
-            t, index = _nearest_vertical(origin, rays[chunk], a, e, top)
+            t, index = _nearest_vertical(origin, rays[chunk], a, e, top, bottom)
             t_hit[chunk] = t
             label[chunk] = geo.seg_label[keep][index]
             glass[chunk] = geo.seg_glass[keep][index]
@@ -268,6 +278,7 @@ def render_depth(
     yaw: float,
     camera: Camera,
     rng: np.random.Generator | None = None,
+    mount: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Depth image seen with base_link at (x, y, yaw).
 
@@ -282,6 +293,7 @@ def render_depth(
         yaw: Heading of base_link in the map frame.
         camera: Sensor and mount.
         rng: Source of depth noise (sigma = noise_k * z**2); None for an exact image.
+        mount: T_base_optical for this frame (a handheld camera's), else the camera's own.
 
     Returns:
         depth: float32 (h, w), metres along the optical z axis, NaN where no return.
@@ -291,7 +303,7 @@ def render_depth(
     """
     geo = _geometry(plan)
     rays_cam = _pixel_rays(camera)
-    mount = camera.T_base_camera
+    mount = camera.T_base_camera if mount is None else mount
     c, s = math.cos(yaw), math.sin(yaw)
     r_world_base = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     origin = np.array([x, y, 0.0]) + r_world_base @ mount[:3, 3]
@@ -336,6 +348,7 @@ def walls_seen(
     *,
     z_band: tuple[float, float] = (1.3, 2.1),
     min_columns: int = 15,
+    mount: np.ndarray | None = None,
 ) -> set[int]:
     """Ids of the walls the detector can see in this frame.
 
@@ -344,7 +357,7 @@ def walls_seen(
     base_link, z up) inside ``z_band``. The height does not depend on the robot's pose.
     """
     points = depth_to_points(depth, camera).astype(float)
-    mount = camera.T_base_camera
+    mount = camera.T_base_camera if mount is None else mount
     z = points @ mount[2, :3] + mount[2, 3]
     with np.errstate(invalid="ignore"):
         mask = (hit_wall >= 0) & (z >= z_band[0]) & (z <= z_band[1])

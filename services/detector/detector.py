@@ -11,7 +11,13 @@ import numpy as np
 from wallmap.common.line_fit import LineFit
 from wallmap.common.messages import Frame, Observations, WallObservation
 from wallmap.common.ransac import RansacParams, RowReport, detect_lines
-from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.scan_row import (
+    RowSelection,
+    frame_stack,
+    free_rays,
+    to_base_xy,
+    upright_points,
+)
 
 # A 2-D lidar: ~1 cm noise, constant with range; single dropped returns do not split a wall.
 SCANNER = RansacParams(noise_k=0.0, sigma_floor=0.01, inlier_min=0.03, nan_run=4, max_jump=0.3)
@@ -74,8 +80,14 @@ class WallDetector:
 
         ``report``, when given, is filled with why (see ``RowReport``).
         """
-        scan = select_scan(frame.points, frame.base_from_sensor, self.config.rows)
+        mount = frame.base_from_sensor
         is_scanner = frame.sensor == "scan"
+        stack = frame_stack(frame.points, mount, self.config.rows, stacked=frame.band is not None)
+        row = stack[0] if stack.shape[0] == 1 else upright_points(stack, mount)
+        scan = to_base_xy(row, mount)
+        # A depth camera's clutter needs telling from walls; a lidar's scan, one height only,
+        # does not, and its path stays as it was.
+        origin, rays = (None, None) if is_scanner else free_rays(stack, mount)
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = replace(base, noise_scale=base.noise_scale * noise.scale)
@@ -104,4 +116,7 @@ class WallDetector:
             frame="base_link",
             walls=walls,
             resends=frame.resends,
+            ray_origin=origin,
+            rays=rays,
+            sensor=frame.sensor,
         )

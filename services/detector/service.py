@@ -99,6 +99,7 @@ def _work(
                     "seq": frame.seq,
                     "stamp": frame.stamp,
                     "sensor": frame.sensor,
+                    "band": None if frame.band is None else list(frame.band),
                     "walls": len(observations.walls),
                     "noise_scale": detector.noise[frame.sensor].scale,
                     **report.to_map(),

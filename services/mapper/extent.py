@@ -5,6 +5,11 @@ and a door inside it disappears. Counting, per bin along the wall, how many obse
 it keeps what was seen repeatedly, and the runs of such bins are the wall's segments, with doors
 and gaps between them. Bins live on an axis fixed when the wall is born (a point and a direction),
 so they stay valid while the wall's line estimate moves; points are projected onto that axis.
+
+Bins also count the sensor's rays that crossed them on their way to something behind: where more
+frames saw through a bin than saw the wall there, there is no wall (a door, the gap above an
+appliance mistaken for a wall, a line the detector drew across free space), and the bin is not
+part of any segment.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ Array = NDArray[np.float64]
 BIN = 0.05  # m
 MIN_HITS = 2  # observations that make a bin part of the wall (when the wall has that many)
 MAX_GAP = 0.3  # m: gaps up to this inside a segment are noise, not a door
+MIN_THROUGH = 2  # rays through a bin before it can be free space
 
 
 class Extent:
@@ -30,6 +36,8 @@ class Extent:
         self.direction = np.asarray(direction, dtype=float)
         self.first = 0  # bin index of counts[0]
         self.counts = np.zeros(0, dtype=np.int32)
+        self.through = np.zeros(0, dtype=np.int32)  # rays that crossed each bin
+        self.revision = 0  # grows with every change, for caches of the segments
 
     def along(self, points: Array) -> Array:
         """Positions of map points on the axis."""
@@ -44,6 +52,27 @@ class Extent:
         )
         self._cover(lo, hi)
         self.counts[lo - self.first : hi - self.first + 1] += 1
+        self.revision += 1
+
+    def add_through(self, points: Array) -> int:
+        """Count rays that crossed the wall's line at map points; returns how many fell inside."""
+        bins = np.floor(self.along(points) / BIN).astype(int) - self.first
+        bins = bins[(bins >= 0) & (bins < len(self.counts))]
+        if len(bins):
+            np.add.at(self.through, bins, 1)
+            self.revision += 1
+        return len(bins)
+
+    def free(self) -> NDArray[np.bool_]:
+        """Bins seen through in more frames than the wall was seen there: no wall."""
+        return (self.through >= MIN_THROUGH) & (self.through > self.counts)
+
+    def free_share(self) -> float:
+        """Share of the bins seen repeatedly that are free (seen through): 0 for a true wall."""
+        if not len(self.counts):
+            return 0.0
+        seen = self.counts >= min(MIN_HITS, int(self.counts.max()))
+        return float((seen & self.free()).sum() / max(int(seen.sum()), 1))
 
     def absorb(self, other: Extent) -> None:
         """Add another wall's counts (a merge), bin by bin, projected onto this axis."""
@@ -53,25 +82,34 @@ class Extent:
         if len(bins):
             self._cover(int(bins.min()), int(bins.max()))
             np.add.at(self.counts, bins - self.first, other.counts)
+            np.add.at(self.through, bins - self.first, other.through)
+            self.revision += 1
 
     def _cover(self, lo: int, hi: int) -> None:
         if not len(self.counts):
             self.first, self.counts = lo, np.zeros(hi - lo + 1, dtype=np.int32)
+            self.through = np.zeros(hi - lo + 1, dtype=np.int32)
             return
         last = self.first + len(self.counts) - 1
         before, after = max(0, self.first - lo), max(0, hi - last)
         if before or after:
-            self.counts = np.concatenate(
-                [np.zeros(before, np.int32), self.counts, np.zeros(after, np.int32)]
-            )
+            pad = (np.zeros(before, np.int32), np.zeros(after, np.int32))
+            self.counts = np.concatenate([pad[0], self.counts, pad[1]])
+            self.through = np.concatenate([pad[0], self.through, pad[1]])
             self.first -= before
 
     def intervals(self) -> list[tuple[float, float]]:
-        """Segments (start, end) on the axis: runs of bins seen ``MIN_HITS`` times, gaps closed."""
+        """Segments (start, end) on the axis: runs of bins seen ``MIN_HITS`` times, gaps closed.
+
+        Free bins (seen through) are left out, unless that would leave nothing: a wall seen
+        through everywhere keeps its segments (and is not served, see ``free_share``).
+        """
         if not len(self.counts):
             return []
         threshold = min(MIN_HITS, int(self.counts.max()))
-        seen = np.flatnonzero(self.counts >= threshold)
+        seen = self.counts >= threshold
+        walled = seen & ~self.free()
+        seen = np.flatnonzero(walled if walled.any() else seen)
         # A new segment starts wherever the gap to the previous seen bin exceeds MAX_GAP.
         breaks = np.flatnonzero(np.diff(seen) * BIN - BIN > MAX_GAP + 1e-9) + 1
         starts = seen[np.concatenate(([0], breaks))]
@@ -88,6 +126,7 @@ class Extent:
             "direction": self.direction.tolist(),
             "first": self.first,
             "counts": self.counts.tolist(),
+            "through": self.through.tolist(),
         }
 
     @classmethod
@@ -96,4 +135,8 @@ class Extent:
         extent = cls(np.array(data["origin"], float), np.array(data["direction"], float))
         extent.first = int(data["first"])
         extent.counts = np.array(data["counts"], dtype=np.int32)
+        through = data.get("through")  # absent from state files before rays were counted
+        extent.through = (
+            np.zeros_like(extent.counts) if through is None else np.array(through, dtype=np.int32)
+        )
         return extent

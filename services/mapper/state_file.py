@@ -51,6 +51,7 @@ def to_json(wall_map: WallMap, runs: Iterable[Progress] = ()) -> dict[str, Any]:
                 "ends": w.ends.tolist(),
                 "extent": w.extent.to_json(),
                 "n_obs": w.n_obs,
+                "depth_obs": w.depth_obs,
                 "views": w.views,
                 "last_view": w.last_view.tolist(),
                 "first_seen": w.first_seen,
@@ -88,6 +89,7 @@ def from_json(data: dict[str, Any], config: MapperConfig) -> WallMap:
             last_seen=float(w["last_seen"]),
             views=int(w["views"]),
             last_view=np.array(w["last_view"], dtype=float).reshape(3),
+            depth_obs=int(w.get("depth_obs", w["n_obs"])),  # older files: as depth cameras made
         )
         if not all(np.isfinite(a).all() for a in (wall.s, wall.p, wall.anchor, wall.ends)):
             msg = f"wall {wall.id} holds non-finite numbers"

@@ -27,6 +27,10 @@ Array = NDArray[np.float64]
 
 SHADOW_SAMPLES = 21  # points along a wall tested for a shadow
 NEAR_LINE = 1.0  # m: farther lines are never candidates for an observation
+THROUGH_MARGIN = 0.1  # m: a ray ends this far past a wall (plus its noise) to cross it
+THROUGH_NOISE = 3e-3  # m per m^2 of range: 3 sigma of a depth camera's range noise, a little more
+THROUGH_NEAR = 0.3  # m from the sensor: nearer crossings are not counted
+SEEN_THROUGH = 0.5  # a wall seen through along this share of its length is none
 
 
 def _default_pose_cov() -> Array:
@@ -66,6 +70,9 @@ class MapperConfig:
         shadow_offset: see above.
         shadow_ratio: see above.
         shadow_cover: see above.
+        fan_angle: of two confirmed walls within this angle (rad)...
+        fan_offset: ...and this distance (m) whose segments overlap by more than...
+        fan_overlap: ...this (m), only the one seen more often is served (see ``_fanned``).
         min_length: a wall whose served segments add up to less than this (m) is served as
             tentative: the detector reports no shorter line, so such a wall is a sliver of one.
         confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
@@ -88,6 +95,9 @@ class MapperConfig:
     shadow_offset: float = 0.10
     shadow_ratio: float = 2.0
     shadow_cover: float = 0.7
+    fan_angle: float = np.radians(8.0)
+    fan_offset: float = 0.30
+    fan_overlap: float = 0.3
     min_length: float = 0.25
     confirm_obs: int = 3
     confirm_views: int = 2
@@ -204,6 +214,7 @@ class Wall:
     last_seen: float
     views: int
     last_view: Array  # (x, y, yaw) of the last distinct viewpoint
+    depth_obs: int = 0  # observations from a depth camera (the rest from a scanner)
 
     def __post_init__(self) -> None:
         self._segments: tuple[tuple[int, bytes], Array] | None = None
@@ -247,7 +258,7 @@ class Wall:
         Kept until the line or the counts change (every change to the counts comes with one to
         ``n_obs``), so replies on a large map redo only the walls that changed. Read-only.
         """
-        key = (self.n_obs, self.s.tobytes())
+        key = (self.n_obs, self.extent.revision, self.s.tobytes())
         if self._segments is None or self._segments[0] != key:
             intervals = self.extent.intervals()
             axis = self.extent.origin + np.outer(np.ravel(intervals), self.extent.direction)
@@ -305,13 +316,44 @@ class WallMap:
         """Fold one frame's observations in; returns the wall id each observation went to."""
         pose_vec = pose.vector
         pose_cov = pose.cov if pose.cov is not None else self.config.pose_cov
-        ids = [self._integrate_one(obs, pose_vec, pose_cov, frame.stamp) for obs in frame.walls]
+        depth = frame.sensor == "depth"
+        ids = [
+            self._integrate_one(obs, pose_vec, pose_cov, frame.stamp, depth=depth)
+            for obs in frame.walls
+        ]
+        if frame.rays is not None and frame.ray_origin is not None and len(frame.rays):
+            self._see_through(frame.ray_origin, frame.rays, pose_vec)
         self.frames += 1
         self.version += 1
         self.observations += len(ids)
         self.stamp = frame.stamp if self.stamp is None else max(self.stamp, frame.stamp)
         self._keep_keyframe(pose)
         return ids
+
+    def _see_through(self, origin: Array, ends: Array, pose: Array) -> None:
+        """Count the rays that crossed walls well before they ended (see ``Extent``).
+
+        A ray crosses a wall's line at some distance from the sensor; it ended past the wall by
+        more than ``THROUGH_MARGIN`` plus its range noise, so the wall is not there.
+        """
+        rot = wall_model.rotation(pose[2])
+        start = pose[:2] + rot @ origin
+        stops = pose[:2] + ends @ rot.T
+        rays = stops - start
+        length = np.linalg.norm(rays, axis=1)
+        margin = THROUGH_MARGIN + THROUGH_NOISE * length**2
+        box = np.array([np.minimum(stops.min(axis=0), start), np.maximum(stops.max(axis=0), start)])
+        for wall_id in sorted(self.index.near(box)):
+            wall = self.walls[wall_id]
+            towards = rays @ wall.normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share = (wall.normal @ (wall.foot - start)) / towards  # where along each ray
+            distance = share * length
+            crossed = (distance > THROUGH_NEAR) & (distance < length - margin)
+            if crossed.any() and wall.extent.add_through(
+                start + share[crossed, None] * rays[crossed]
+            ):
+                self.changed.add(wall.id)
 
     def _keep_keyframe(self, pose: Pose) -> None:
         last = np.array(self.trajectory[-1][1:]) if self.trajectory else None
@@ -320,7 +362,7 @@ class WallMap:
             self.trajectory.append((pose.stamp, pose.x, pose.y, pose.yaw))
 
     def _integrate_one(
-        self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float
+        self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float, *, depth: bool
     ) -> int:
         rot = wall_model.rotation(pose[2])
         seg = np.array([pose[:2] + rot @ obs.p0, pose[:2] + rot @ obs.p1])
@@ -334,8 +376,11 @@ class WallMap:
             ):
                 best = (innov.log_likelihood, wall, innov)
         if best is None:
-            return self._new_wall(obs, pose, pose_cov, seg, stamp)
+            wall_id = self._new_wall(obs, pose, pose_cov, seg, stamp)
+            self.walls[wall_id].depth_obs = int(depth)
+            return wall_id
         _, wall, innov = best
+        wall.depth_obs += int(depth)
         wall.set_state(*ekf.update(wall.s, wall.p, innov))
         wall.extend(seg)
         self.index.file(wall.id, wall.ends)
@@ -358,6 +403,7 @@ class WallMap:
                 keep.extend(gone.ends)
                 keep.extent.absorb(gone.extent)
                 keep.n_obs += gone.n_obs
+                keep.depth_obs += gone.depth_obs
                 keep.views += gone.views
                 keep.first_seen = min(keep.first_seen, gone.first_seen)
                 keep.last_seen = max(keep.last_seen, gone.last_seen)
@@ -456,12 +502,48 @@ class WallMap:
         return float(covered.mean()) >= cfg.shadow_cover
 
     def served(self, wall: Wall) -> bool:
-        """Confirmed and not a shadow of another wall: what a reply holds by default."""
+        """Confirmed, not seen through, not a shadow of another wall: what a reply serves."""
         if not wall.confirmed(self.config):
+            return False
+        if wall.extent.free_share() >= SEEN_THROUGH:
             return False
         pieces = wall.segments()
         length = float(np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum())
-        return length >= self.config.min_length and not self._shadowed(wall)
+        if length < self.config.min_length or self._shadowed(wall):
+            return False
+        return not self._fanned(wall, pieces)
+
+    def _fanned(self, wall: Wall, pieces: Array) -> bool:
+        """Whether a better-seen confirmed wall runs alongside: one surface as two lines.
+
+        On real clutter a surface and what stands against it (a cabinet front, appliances on a
+        counter) come out as lines a few degrees and centimetres apart. Of two confirmed walls
+        within ``fan_angle`` and ``fan_offset`` whose segments overlap by ``fan_overlap``, only
+        the one seen more often (the older on a tie) is served. Walls seen mostly by a scanner
+        are left alone: its one plane sees no clutter stand against walls, and a bent wall's
+        near-parallel pieces are each where its points are.
+        """
+        cfg = self.config
+        if 2 * wall.depth_obs <= wall.n_obs:
+            return False
+        cos_max = math.cos(cfg.fan_angle)
+        ta = wall.along(pieces.reshape(-1, 2))
+        for other in (self.walls[i] for i in sorted(self.index.near(wall.ends))):
+            if other is wall or (other.n_obs, -other.id) < (wall.n_obs, -wall.id):
+                continue
+            if abs(float(wall.normal @ other.normal)) < cos_max or not other.confirmed(cfg):
+                continue
+            if 2 * other.depth_obs <= other.n_obs:
+                continue
+            theirs = other.segments()
+            tb = wall.along(theirs.reshape(-1, 2))
+            low, high = max(ta.min(), tb.min()), min(ta.max(), tb.max())
+            if high - low <= cfg.fan_overlap:
+                continue
+            middle = wall.on_line(np.array([0.5 * (low + high)]))[0]
+            if abs(float(other.normal @ (middle - other.foot))) <= cfg.fan_offset:
+                return True
+        return False
 
     def _selected(self, wall: Wall, query: MapQuery, served: dict[int, bool]) -> bool:
         served[wall.id] = self.served(wall)

@@ -25,13 +25,21 @@ from wallmap.common.ros_poses import (
     pose_from_matrix,
     pose_from_message,
 )
-from wallmap.common.scan_row import RowSelection, pick_points, rows_to_search
+from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
 from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
 from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.laserscan import laserscan_to_xyz
 from wallmap.services.player.mapped_bag import mapped_messages
+from wallmap.services.player.placement import (
+    SURVEY_FRAMES,
+    LevelMode,
+    Placement,
+    Sample,
+    survey,
+    unlevelled,
+)
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 from wallmap.services.player.pose_sources import (
     PoseSourceSpec,
@@ -50,6 +58,7 @@ CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 # tf2's message, and tf1's older one with the same layout (both renamed to ROS 2 style).
 TF_TYPES = frozenset({"tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"})
 TF_TOPICS = {"tf": False, "tf_static": True}  # normalised topic name -> static
+FIXED_FRAMES = ("map", "odom", "world")  # REP-105's fixed frames, most global first
 # How far (s) a sensor stamp may lie outside the pose data and still get the end pose.
 POSE_TOLERANCE = 0.05
 SUPPORTED_SENSORS = (
@@ -133,14 +142,6 @@ def _namespace(topic: str) -> str:
     return topic.lstrip("/").rpartition("/")[0]
 
 
-def _planar_matrix(pose: Pose) -> np.ndarray:
-    """The 4x4 transform of a planar pose (frame <- child)."""
-    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-    return np.array(
-        [[c, -s, 0.0, pose.x], [s, c, 0.0, pose.y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-    )
-
-
 class BagSource:
     """Sensor frames and robot poses from one bag, checked and ready when constructed.
 
@@ -152,6 +153,7 @@ class BagSource:
         base_frame: Robot frame that poses describe and ``T_base_sensor`` maps into.
         warnings: Assumptions made while opening (e.g. an identity sensor mounting) for the CLI
             to log.
+        placement: How frames are placed: the levelled fixed frame, the band the sensor sees.
     """
 
     def __init__(
@@ -162,6 +164,8 @@ class BagSource:
         pose_source: str = "tf",
         base_frame: str | None = None,
         topics: Iterable[str] | None = None,
+        level: LevelMode = "auto",
+        floor_z: float | None = None,
     ) -> None:
         """Open the bag and resolve the sensor topic, pose source and sensor mounting.
 
@@ -173,6 +177,9 @@ class BagSource:
                 for tf, pose, tum and none; the odometry's child frame for odom).
             topics: Read only these topics (leading '/' optional), as ``ros2 bag play --topics``:
                 the sensor topic, tf and pose topics are looked for among them.
+            level: ``auto`` levels a fixed frame that is not level, from the depth data;
+                ``none`` takes it as it is.
+            floor_z: The floor's height in the fixed frame, instead of the one found.
 
         Raises:
             PlayerError: Unreadable bag, no usable (or an ambiguous) sensor topic, a bad pose
@@ -184,6 +191,7 @@ class BagSource:
         self._reader = _open_reader(self.path)
         try:
             self._setup(sensor_topic, base_frame, topics)
+            self.placement = self._survey(level, floor_z)
         except BaseException:
             self._reader.close()
             raise
@@ -214,6 +222,8 @@ class BagSource:
             normalize_frame(base_frame) if base_frame else DEFAULT_CHILD
         )
         self._decode = self._decoder(camera_info)
+        if base_frame is None:
+            self._find_moving_frame()
 
         track = self._track
         self._compose_track = False
@@ -345,6 +355,28 @@ class BagSource:
             return lambda scan, _rows: laserscan_to_xyz(scan)
         return lambda image, rows: depth_image_to_xyz(image, camera_info, rows)
 
+    def _find_moving_frame(self) -> None:
+        """Without ``base_link`` in tf, the plain ``tf`` source follows the chain to the sensor.
+
+        A handheld camera, a SLAM or a reconstruction system publishes ``map -> camera_link``
+        (6-DoF) and no robot frame: the poses are then those of the frame that carries the
+        sensor (``TfBuffer.moving_frame``), from the first fixed frame of REP-105 that has one.
+        """
+        spec = self.pose_spec
+        if spec.kind != "tf" or spec.named or self._tf.has_path(spec.parent, spec.child):
+            return
+        sensor_frame = normalize_frame(self._first_message(self.sensor_topic).header.frame_id)
+        for fixed in FIXED_FRAMES:
+            moving = self._tf.moving_frame(fixed, sensor_frame) if sensor_frame else None
+            if moving is not None:
+                self.pose_spec = dataclasses.replace(spec, parent=fixed, child=moving)
+                self.warnings.append(
+                    f"no tf {spec.parent} -> {spec.child}: the poses are those of {moving!r} in "
+                    f"{fixed!r}, the chain to the sensor's frame {sensor_frame!r} "
+                    f"(--pose-source tf:{fixed}>{moving}; name other frames the same way)"
+                )
+                return
+
     # --- first pass: tf, poses, camera info ---------------------------------------------------
 
     def _load_first_pass(self, child: str) -> Any:
@@ -430,8 +462,36 @@ class BagSource:
             f"{self._tf.no_path_message(self.base_frame, frame_id)}"
         )
 
+    def _survey(self, level: LevelMode, floor_z: float | None) -> Placement:
+        """Level the fixed frame and find the band from frames spread over the bag."""
+        if self.pose_spec.kind == "none":
+            return unlevelled(self.base_frame)
+        samples = [] if self.sensor_type == LASERSCAN else list(self._samples())
+        return survey(samples, self.base_frame, mode=level, floor_z=floor_z)
+
+    def _samples(self) -> Iterator[Sample]:
+        """Up to SURVEY_FRAMES whole frames spread over the bag, with their poses."""
+        connections = self._topics[self.sensor_topic].connections
+        begin, length = self._reader.start_time, max(self._reader.duration, 1)
+        step = length // SURVEY_FRAMES + 1
+        for start in range(begin, begin + length, step):
+            messages = self._messages(connections, mapped=True, start=start, stop=start + step)
+            item = next(messages, None)
+            messages.close()
+            if item is None:
+                continue
+            _, receive_ns, msg = item
+            stamp = header_stamp(msg.header, receive_ns)
+            pose = self._pose_at(stamp)
+            if pose is None:
+                continue
+            frame_id = normalize_frame(msg.header.frame_id)
+            mount = self._mount(frame_id, stamp)
+            points = invalid_to_nan(np.array(self._decode(msg, slice(None)), dtype=np.float32))
+            yield Sample(points, pose.matrix @ mount, frame_id or self.base_frame)
+
     def _pose_at(self, stamp: float) -> Pose | None:
-        """The base frame's pose at a sensor stamp, or None where the source does not cover it."""
+        """The base frame's 6-DoF pose at a stamp, or None where the source does not cover it."""
         spec = self.pose_spec
         if spec.kind == "tf":
             try:
@@ -447,9 +507,7 @@ class BagSource:
         if pose is None or not self._compose_track:
             return pose
         child_base = self._tf.lookup(pose.child, self.base_frame, stamp, tolerance=math.inf)
-        moved = pose_from_matrix(
-            _planar_matrix(pose) @ child_base, stamp, pose.frame, self.base_frame
-        )
+        moved = pose_from_matrix(pose.matrix @ child_base, stamp, pose.frame, self.base_frame)
         return dataclasses.replace(moved, cov=pose.cov)
 
     def _messages(
@@ -487,9 +545,11 @@ class BagSource:
         """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
 
         Args:
-            rows: Hand out only the scan row this selection picks, as a (1, w, 3) grid, reading
-                only the image rows it searches (``rows_to_search``): decoding whole clouds is
-                most of a player's time. None hands out every row.
+            rows: Hand out only what this selection picks (``pick_points``: the band's stack
+                of points, or one row), reading only the image rows it searches
+                (``rows_to_search``): decoding whole clouds is most of a player's time. The band
+                is the selection's, or the one the sensor sees (``placement.band``). None hands
+                out every row.
             start: Seconds from the bag's start: the first message received then or later.
             stop: Seconds from the bag's start: messages received before it only.
 
@@ -503,23 +563,28 @@ class BagSource:
             "stop": None if stop is None else begin + round(stop * 1e9),
         }
         messages = self._messages(connections, mapped=True, **window)
+        band = None if rows is None else rows.band or self.placement.band or DEFAULT_BAND
         for index, (_, receive_ns, msg) in enumerate(messages):
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
             try:
-                mount = self._mount(frame_id, stamp)
+                pose, mount = self.placement.place(
+                    self._pose_at(stamp), self._mount(frame_id, stamp)
+                )
+                stacked = None
                 if rows is None:
                     points = self._decode(msg, slice(None))
                 else:  # a LaserScan has no height: it is one row
                     searched = self._decode(msg, rows_to_search(rows, getattr(msg, "height", 1)))
-                    points = pick_points(searched, mount, rows)[None]
+                    points = pick_points(searched, mount, band)
+                    stacked = band if points.shape[0] > 1 else None
                 if points.base is not None or points.dtype != np.float32:  # not ours to change
                     points = np.array(points, dtype=np.float32)
                 points = invalid_to_nan(points)
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
             bag_time = (receive_ns - begin) * 1e-9
-            yield SensorFrame(stamp, frame_id, points, mount, bag_time), self._pose_at(stamp)
+            yield SensorFrame(stamp, frame_id, points, mount, bag_time, stacked), pose
 
     # --- bookkeeping --------------------------------------------------------------------------
 

@@ -97,5 +97,21 @@ def depth_image_to_xyz(image: Any, camera_info: Any, rows: slice = slice(None)) 
             f"depth image encoding {encoding!r} is not supported "
             f"(supported: {', '.join(SUPPORTED_ENCODINGS)})"
         )
-    rays = _rays(height, width, _intrinsics(camera_info))[rows]
-    return rays * depth[..., np.newaxis]
+    return back_project(depth, (height, width), _intrinsics(camera_info), rows)
+
+
+def back_project(
+    depth: np.ndarray,
+    size: tuple[int, int],
+    intrinsics: tuple[float, float, float, float],
+    rows: slice = slice(None),
+) -> np.ndarray:
+    """Points (rows, w, 3) in the optical frame from depths (m, NaN for none) of those rows.
+
+    Args:
+        depth: float32 depths of the rows ``rows`` of an image of ``size`` (height, width).
+        size: The whole image's (height, width).
+        intrinsics: (fx, fy, cx, cy) in pixels.
+        rows: Which rows ``depth`` holds.
+    """
+    return _rays(*size, intrinsics)[rows] * depth[..., np.newaxis]

@@ -16,6 +16,8 @@ class SensorFrame:
             asked for); NaN marks pixels without a return.
         T_base_sensor: float64 4x4 transform mapping sensor-frame points into the base frame.
         bag_time: When the bag received it, seconds from the bag's start (for playback).
+        band: When ``points`` is the band's stack (``pick_points``), that band (m above the
+            floor); None for whole clouds and single rows.
     """
 
     stamp: float
@@ -23,3 +25,4 @@ class SensorFrame:
     points: np.ndarray
     T_base_sensor: np.ndarray
     bag_time: float = 0.0
+    band: tuple[float, float] | None = None

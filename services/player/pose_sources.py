@@ -1,25 +1,28 @@
 """Where the robot's pose comes from: the ``--pose-source`` spec, pose tracks and TUM files.
 
 Bags carry the robot pose in different ways (a tf chain, an odometry topic, a localizer's pose
-topic) and some carry none, so the user picks one with a short spec. Poses are reduced to the
-plane (x, y, yaw) because the mapper works on a planar robot.
+topic) and some carry none, so the user picks one with a short spec. Poses keep all six degrees
+of freedom here (a handheld camera's trajectory is not planar); the bag source splits each into
+the planar pose the map uses and the tilt that goes with the frame's mount.
 """
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
 from wallmap.common.messages import Pose
+from wallmap.common.pose3d import quaternion_from_matrix, slerp, transform_matrix
 from wallmap.common.ros_poses import (
     DEFAULT_CHILD,
     DEFAULT_PARENT,
     ODOMETRY_TYPE,
     POSE_TYPES,
-    yaw_from_quaternion,
+    pose_from_matrix,
 )
 from wallmap.common.tf_buffer import normalize_frame
 from wallmap.services.player.errors import PlayerError
@@ -39,6 +42,8 @@ class PoseSourceSpec:
         child: Robot frame of a tf source.
         topic: Topic of an odom/pose source; None means "detect it in the bag".
         path: File of a tum source.
+        named: Whether a tf source named its frames (``tf:PARENT>CHILD``) rather than taking the
+            default ``map -> base_link``, which a bag without ``base_link`` may replace.
     """
 
     kind: PoseSourceKind
@@ -46,6 +51,7 @@ class PoseSourceSpec:
     child: str = DEFAULT_CHILD
     topic: str | None = None
     path: Path | None = None
+    named: bool = False
 
     def __str__(self) -> str:
         """The canonical spec, for logs and error messages."""
@@ -80,7 +86,7 @@ def parse_pose_source(spec: str) -> PoseSourceSpec:
     if kind == "tf" and (match := re.fullmatch(r"([^>\s]+)\s*>\s*([^>\s]+)", argument)):
         parent, child = normalize_frame(match[1]), normalize_frame(match[2])
         if parent and child and parent != child:
-            return PoseSourceSpec("tf", parent=parent, child=child)
+            return PoseSourceSpec("tf", parent=parent, child=child, named=True)
     if kind in {"odom", "pose"} and not colon:
         return PoseSourceSpec(kind)
     if kind in {"odom", "pose"} and argument and not any(c.isspace() for c in argument):
@@ -131,29 +137,22 @@ def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str:
     return matches[0]
 
 
-def _wrap(angle: np.ndarray | float) -> Any:
-    """Wrap angles into [-pi, pi)."""
-    return (np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi
-
-
 @dataclass(frozen=True, eq=False)
 class PoseTrack:
-    """A time-sorted planar trajectory, interpolated at sensor stamps.
+    """A time-sorted 6-DoF trajectory, interpolated at sensor stamps.
 
     Attributes:
         stamps: Strictly increasing sample times, float seconds.
-        x: Positions along x, metres.
-        y: Positions along y, metres.
-        yaw: Headings, radians.
+        positions: (n, 3) positions, metres.
+        rotations: (n, 4) unit quaternions (x, y, z, w).
         cov: (n, 3, 3) x/y/yaw covariances, NaN where a sample has none; None if none has one.
         frame: Fixed frame of the poses.
-        child: Robot frame the poses describe.
+        child: Frame the poses describe (the robot's base, or the sensor itself).
     """
 
     stamps: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    yaw: np.ndarray
+    positions: np.ndarray
+    rotations: np.ndarray
     cov: np.ndarray | None
     frame: str = DEFAULT_PARENT
     child: str = DEFAULT_CHILD
@@ -170,20 +169,14 @@ class PoseTrack:
         stamps = np.array([p.stamp for p in poses], dtype=np.float64)
         order = np.argsort(stamps, kind="stable")
         stamps = stamps[order]
-        keep = order[np.append(stamps[1:] != stamps[:-1], True)]
+        kept = [poses[i] for i in order[np.append(stamps[1:] != stamps[:-1], True)]]
         cov = None
-        if any(p.cov is not None for p in poses):
-            cov = np.stack(
-                [
-                    poses[i].cov if poses[i].cov is not None else np.full((3, 3), np.nan)
-                    for i in keep
-                ]
-            )
+        if any(p.cov is not None for p in kept):
+            cov = np.stack([p.cov if p.cov is not None else np.full((3, 3), np.nan) for p in kept])
         return cls(
-            stamps=np.array([poses[i].stamp for i in keep]),
-            x=np.array([poses[i].x for i in keep]),
-            y=np.array([poses[i].y for i in keep]),
-            yaw=np.array([poses[i].yaw for i in keep]),
+            stamps=np.array([p.stamp for p in kept]),
+            positions=np.array([(p.x, p.y, p.z) for p in kept]),
+            rotations=np.array([quaternion_from_matrix(p.matrix[:3, :3]) for p in kept]),
             cov=cov,
             frame=poses[0].frame,
             child=poses[0].child,
@@ -196,8 +189,8 @@ class PoseTrack:
     def at(self, stamp: float, *, tolerance: float = 0.05) -> Pose | None:
         """Interpolate the pose at ``stamp``.
 
-        Position and covariance interpolate linearly, yaw along the shorter way round the circle.
-        Within ``tolerance`` seconds outside the track the end sample is used.
+        Position and covariance interpolate linearly, the rotation along the shorter arc
+        (slerp). Within ``tolerance`` seconds outside the track the end sample is used.
 
         Args:
             stamp: Query time, float seconds.
@@ -214,14 +207,15 @@ class PoseTrack:
         upper = min(upper, stamps.size - 1)
         span = stamps[upper] - stamps[lower]
         weight = min(max((stamp - stamps[lower]) / span, 0.0), 1.0) if span > 0 else 0.0
-        x = self.x[lower] + (self.x[upper] - self.x[lower]) * weight
-        y = self.y[lower] + (self.y[upper] - self.y[lower]) * weight
-        yaw = _wrap(self.yaw[lower] + _wrap(self.yaw[upper] - self.yaw[lower]) * weight)
-        cov = None
-        if self.cov is not None:
-            mixed = self.cov[lower] + (self.cov[upper] - self.cov[lower]) * weight
-            cov = None if np.isnan(mixed).any() else mixed
-        return Pose(float(stamp), float(x), float(y), float(yaw), cov, self.frame, self.child)
+        position = self.positions[lower] + (self.positions[upper] - self.positions[lower]) * weight
+        rotation = slerp(tuple(self.rotations[lower]), tuple(self.rotations[upper]), weight)
+        pose = pose_from_matrix(
+            transform_matrix(tuple(position), rotation), float(stamp), self.frame, self.child
+        )
+        if self.cov is None:
+            return pose
+        mixed = self.cov[lower] + (self.cov[upper] - self.cov[lower]) * weight
+        return pose if np.isnan(mixed).any() else dataclasses.replace(pose, cov=mixed)
 
 
 def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CHILD) -> PoseTrack:
@@ -233,7 +227,7 @@ def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CH
         child: Robot frame the poses describe.
 
     Returns:
-        The planar track.
+        The track (6-DoF: TUM RGB-D ground truth is the camera's optical frame).
 
     Raises:
         PlayerError: The file is unreadable, a line is malformed (its number is given), or the
@@ -257,8 +251,14 @@ def load_tum(path: Path, *, frame: str = DEFAULT_PARENT, child: str = DEFAULT_CH
                 f"TUM pose file {path} line {number}: expected 8 numbers "
                 f"'t x y z qx qy qz qw', got {content!r}"
             )
-        t, x, y, _, qx, qy, qz, qw = values
-        poses.append(Pose(t, x, y, yaw_from_quaternion(qx, qy, qz, qw), None, frame, child))
+        t, x, y, z, qx, qy, qz, qw = values
+        norm = math.hypot(qx, qy, qz, qw)
+        if not 0.9 < norm < 1.1:
+            raise PlayerError(
+                f"TUM pose file {path} line {number}: the quaternion (qx qy qz qw) is not unit"
+            )
+        matrix = transform_matrix((x, y, z), (qx / norm, qy / norm, qz / norm, qw / norm))
+        poses.append(pose_from_matrix(matrix, t, frame, child))
     if not poses:
         raise PlayerError(f"TUM pose file {path} holds no poses")
     return PoseTrack.from_poses(poses)

@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,10 +27,11 @@ from wallmap.common.messages import Frame, Pose, pack, unpack_progress
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.player.bag_source import LASERSCAN, BagSource
+from wallmap.services.player.bag_source import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback
+from wallmap.services.player.sources import FrameSource, SourceOptions, open_source
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
 STOP_POLL = 0.05  # s between checks of the stop event while waiting for acknowledgements
@@ -45,11 +46,10 @@ class PlayerSettings:
     """How to play a bag.
 
     Attributes:
-        bag: a ROS 1 ``.bag`` file or a ROS 2 bag folder.
+        bag: a ROS 1 ``.bag`` file, a ROS 2 bag folder or a TUM RGB-D folder.
         rate: speed factor on the recorded timing (ignored with ``fast``).
         fast: as fast as the pipeline takes it, with no frame lost.
-        pose_source: the contract's ``--pose-source`` spec.
-        sensor_topic: the sensor topic, when the bag has several candidates.
+        source: how to read it: pose source, sensor topic, levelling, a TUM folder's camera.
         window: frames in flight with ``fast``.
         wait_for: services whose liveliness to wait for before playing.
         wait_timeout: how long to wait for them (s).
@@ -58,15 +58,13 @@ class PlayerSettings:
         start: begin this many seconds into the bag.
         duration: play this many seconds of the bag (None: to the end).
         loop: start over at the end, until stopped.
-        topics: read only these topics (None: all).
         paused: start paused (step or resume through the controls).
     """
 
     bag: Path
     rate: float = 1.0
     fast: bool = False
-    pose_source: str = "tf"
-    sensor_topic: str | None = None
+    source: SourceOptions = field(default_factory=SourceOptions)
     window: int = 16
     wait_for: tuple[str, ...] = ()
     wait_timeout: float = 30.0
@@ -75,7 +73,6 @@ class PlayerSettings:
     start: float = 0.0
     duration: float | None = None
     loop: bool = False
-    topics: tuple[str, ...] | None = None
     paused: bool = False
 
 
@@ -263,7 +260,7 @@ class _Outlet:
 
     def __init__(
         self, session: zenoh.Session, keys: Keys, run_id: str, sensor: str, playback: Playback,
-        bag: BagSource,
+        bag: FrameSource,
     ) -> None:  # fmt: skip
         block = zenoh.CongestionControl.BLOCK
         self._frames = session.declare_publisher(keys.frames, congestion_control=block)
@@ -296,7 +293,7 @@ class _Outlet:
             self.poses += 1
         message = Frame(
             self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-            frame.T_base_sensor, self._sensor, self.resends,
+            frame.T_base_sensor, self._sensor, self.resends, frame.band,
         )  # fmt: skip
         self._frames.put(pack(message))
         self._sent.append((self.published, frame.bag_time))
@@ -313,7 +310,7 @@ class _Outlet:
 
 
 def _play_pass(
-    bag: BagSource,
+    bag: FrameSource,
     rows: RowSelection | None,
     start: float,
     player: PlayerSettings,
@@ -344,12 +341,7 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
     keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
-    with BagSource(
-        player.bag,
-        sensor_topic=player.sensor_topic,
-        pose_source=player.pose_source,
-        topics=player.topics,
-    ) as bag:
+    with open_source(player.bag, player.source) as bag:
         for warning in bag.warnings:
             log.warning("%s", warning)
         log.info(
@@ -358,8 +350,10 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
             bag.frame_count,
             bag.sensor_topic,
             bag.sensor_type,
-            player.pose_source,
+            bag.pose_spec,
         )
+        if placed := bag.placement.describe():
+            log.info("%s", placed)
         with open_session(settings) as session:
             acks = _Acks(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)

@@ -1,0 +1,130 @@
+"""Where each frame stands: the levelled fixed frame, the planar pose and the tilted mount.
+
+A source (a bag, a TUM folder) gives, per frame, the 6-DoF pose of a robot or sensor frame in
+some fixed frame, and the sensor's mount on it. Before the first frame is played, a survey of a
+few frames finds which way is up in the fixed frame and where its floor is (``common.level``),
+and what heights the sensor sees (for the band). Then each frame's pose is levelled and split:
+the planar pose goes to the mapper, the height, roll and pitch go into the frame's mount, where
+the detector needs them to find the band.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common.level import Level, level_from_frames
+from wallmap.common.messages import Pose
+from wallmap.common.pose3d import FORWARD_Z, forward_axis, split_planar
+from wallmap.common.scan_row import DEFAULT_BAND, auto_band
+
+Array = NDArray[np.float64]
+LevelMode = Literal["auto", "none"]
+SURVEY_FRAMES = 24  # frames spread over the recording that the survey looks at
+SURVEY_POINTS = 4000  # points per surveyed frame
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One surveyed frame: its points (sensor frame), T_fixed_sensor, the sensor frame's name."""
+
+    points: NDArray[np.float32]
+    fixed_from_sensor: Array
+    sensor_frame: str
+
+
+@dataclass(frozen=True)
+class Placement:
+    """How a source's frames are placed.
+
+    Attributes:
+        levelling: T_level_fixed: up onto z, the floor at z = 0.
+        forward: The robot (or sensor) frame's forward axis, whose heading is the planar yaw.
+        level: What the survey found (None when there was nothing to survey).
+        band: The height band the sensor sees (None: unknown, the detector's default holds).
+    """
+
+    levelling: Array
+    forward: int
+    level: Level | None = None
+    band: tuple[float, float] | None = None
+
+    def place(self, pose: Pose | None, mount: Array) -> tuple[Pose | None, Array]:
+        """A frame's planar pose and its mount (T_base_sensor) with the pose's tilt in it.
+
+        Args:
+            pose: The 6-DoF pose of the robot (or sensor) frame in the fixed frame, or None.
+            mount: T_robot_sensor.
+        """
+        if pose is None:
+            return None, mount
+        x, y, yaw, tilt = split_planar(self.levelling @ pose.matrix, self.forward)
+        planar = Pose(pose.stamp, x, y, yaw, pose.cov, pose.frame, pose.child)
+        return planar, tilt @ mount
+
+    def describe(self) -> str:
+        """One line for people: the level found and the band."""
+        parts = [self.level.describe()] if self.level is not None else []
+        if self.band is not None:
+            parts.append(f"the sensor sees {self.band[0]:.2f}-{self.band[1]:.2f} m above the floor")
+        return "; ".join(parts)
+
+
+def sensor_up(fixed_from_sensor: Array, sensor_frame: str) -> Array:
+    """The sensor's own up axis in the fixed frame: -y of an optical frame, z of a body frame."""
+    rotation = fixed_from_sensor[:3, :3]
+    return -rotation[:, 1] if forward_axis(sensor_frame) == FORWARD_Z else rotation[:, 2]
+
+
+def survey(
+    samples: list[Sample],
+    robot_frame: str,
+    *,
+    mode: LevelMode = "auto",
+    floor_z: float | None = None,
+    seed: int = 0,
+) -> Placement:
+    """Level the fixed frame from some frames and find the band their sensor sees.
+
+    Args:
+        samples: A few frames spread over the recording, with their poses.
+        robot_frame: The frame the poses describe (its forward axis gives the yaw).
+        mode: ``auto`` finds up and the floor; ``none`` takes the fixed frame as level with its
+            floor at z = 0 (or ``floor_z``).
+        floor_z: The floor's height in the fixed frame (along up), overriding what is found.
+        seed: For RANSAC, so a run repeats exactly.
+    """
+    forward = forward_axis(robot_frame)
+    clouds = [_in_fixed_frame(sample) for sample in samples]
+    if mode == "none" or not samples:
+        levelling = np.eye(4)
+        levelling[2, 3] = -(floor_z or 0.0)
+        level = None
+    else:
+        ups = np.array([sensor_up(s.fixed_from_sensor, s.sensor_frame) for s in samples])
+        positions = np.array([s.fixed_from_sensor[:3, 3] for s in samples])
+        level = level_from_frames(clouds, ups, positions, np.random.default_rng(seed))
+        levelling = level.matrix(floor_z)
+    band = None
+    if samples:
+        heights = np.concatenate([c @ levelling[2, :3] + levelling[2, 3] for c in clouds])
+        band = auto_band(heights, DEFAULT_BAND)
+    return Placement(levelling, forward, level, band)
+
+
+def _in_fixed_frame(sample: Sample) -> Array:
+    """Up to SURVEY_POINTS of a frame's finite points, in the fixed frame."""
+    points = sample.points.reshape(-1, 3).astype(np.float64)
+    points = points[np.isfinite(points).all(axis=1)]
+    if len(points) > SURVEY_POINTS:
+        points = points[:: len(points) // SURVEY_POINTS]
+    transform = sample.fixed_from_sensor
+    return points @ transform[:3, :3].T + transform[:3, 3]
+
+
+def unlevelled(robot_frame: str) -> Placement:
+    """The placement of a source without poses: nothing to level, mounts as they are."""
+    return Placement(np.eye(4), forward_axis(robot_frame))

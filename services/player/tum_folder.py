@@ -1,0 +1,242 @@
+"""A TUM RGB-D folder as a source of frames: ``depth.txt``, 16-bit PNG depth maps, a trajectory.
+
+The TUM RGB-D benchmark's layout is how many RGB-D recordings are shared (TUM, ICL-NUIM, 7-Scenes
+converted, most SLAM systems' outputs): ``depth.txt`` lists ``timestamp path`` of 16-bit PNG depth
+images, ``groundtruth.txt`` is the camera's trajectory (``t x y z qx qy qz qw`` of its optical
+frame). Depths are integers, ``depth_scale`` per metre (5000 for TUM, 1000 for millimetres), 0
+for no return. The folder plays like a bag (``BagSource``'s interface), its poses are 6-DoF and
+describe the optical frame itself, so a frame's mount is the identity before levelling.
+
+PNG decoding is Pillow's: it reads 16-bit grayscale exactly (checked against pypng, a pure-Python
+reader), 22 times faster (5 ms against 105 ms for a 640 x 480 image here), and is a 7 MB wheel
+with no further dependencies; OpenCV would be 50 MB for the same.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import Self
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from wallmap.common.messages import Pose
+from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
+from wallmap.services.player.depth import back_project
+from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.frames import SensorFrame
+from wallmap.services.player.placement import (
+    SURVEY_FRAMES,
+    LevelMode,
+    Sample,
+    survey,
+    unlevelled,
+)
+from wallmap.services.player.pose_sources import (
+    PoseSourceSpec,
+    PoseTrack,
+    load_tum,
+    parse_pose_source,
+)
+
+TUM_INTRINSICS = (525.0, 525.0, 319.5, 239.5)  # TUM's default calibration (fx, fy, cx, cy)
+TUM_DEPTH_SCALE = 5000.0  # TUM depth PNGs: 5000 units per metre
+OPTICAL_FRAME = "camera_optical_frame"  # what a TUM trajectory describes
+SENSOR_TYPE = "TUM RGB-D depth (16-bit PNG)"
+POSE_TOLERANCE = 0.05  # s a depth stamp may lie outside the trajectory and still get its end
+_GRAY_16 = ("I;16", "I;16L", "I;16B", "I")  # Pillow's modes of a 16-bit grayscale PNG
+
+
+def is_tum_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder in the TUM RGB-D layout (it has a ``depth.txt``)."""
+    return path.is_dir() and (path / "depth.txt").is_file()
+
+
+def read_depth_list(path: Path) -> list[tuple[float, Path]]:
+    """``depth.txt``: (timestamp, image path) per line, ``#`` comments; PlayerError if broken."""
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise PlayerError(f"cannot read {path}: {err}") from err
+    entries = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        content = line.split("#", 1)[0].strip()
+        if not content:
+            continue
+        fields = content.split()
+        try:
+            stamp = float(fields[0])
+        except (ValueError, IndexError):
+            stamp = math.nan
+        if len(fields) != 2 or not math.isfinite(stamp):
+            raise PlayerError(
+                f"{path} line {number}: expected 'timestamp filename', got {content!r}"
+            )
+        entries.append((stamp, path.parent / fields[1]))
+    if not entries:
+        raise PlayerError(f"{path} lists no depth images")
+    entries.sort(key=lambda entry: entry[0])
+    return entries
+
+
+def read_depth_png(path: Path, scale: float) -> np.ndarray:
+    """A 16-bit PNG depth map as float32 metres (NaN for no return); PlayerError if not one."""
+    try:
+        with Image.open(path) as image:
+            if image.mode not in _GRAY_16:
+                raise PlayerError(
+                    f"{path} is a {image.mode} image, not a 16-bit grayscale depth map"
+                )
+            raw = np.asarray(image, dtype=np.uint16)
+    except (OSError, UnidentifiedImageError) as err:
+        raise PlayerError(f"cannot read depth image {path}: {err}") from err
+    depth = raw.astype(np.float32) / np.float32(scale)
+    depth[raw == 0] = np.nan
+    return depth
+
+
+class TumFolder:
+    """Depth frames and 6-DoF camera poses from a TUM RGB-D folder, like ``BagSource``.
+
+    Attributes:
+        path: The folder.
+        entries: (stamp, image path) of every depth image, in time order.
+        size: The images' (height, width).
+        sensor_topic: ``depth.txt`` (the list of frames).
+        sensor_type: What the frames are.
+        pose_spec: The pose source (default: the folder's ``groundtruth.txt``).
+        base_frame: The frame the poses describe: the camera's optical frame.
+        warnings: Assumptions made while opening, for the CLI to log.
+        placement: How frames are placed: the levelled fixed frame, the band the sensor sees.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        pose_source: str | None = None,
+        intrinsics: tuple[float, float, float, float] = TUM_INTRINSICS,
+        depth_scale: float = TUM_DEPTH_SCALE,
+        level: LevelMode = "auto",
+        floor_z: float | None = None,
+    ) -> None:
+        """Read the frame list and the trajectory, and survey the frames.
+
+        Raises:
+            PlayerError: A missing or malformed ``depth.txt`` or trajectory, an unreadable image,
+                or a pose source a folder cannot have (tf, odom, pose topics).
+        """
+        self.path = Path(path)
+        self.entries = read_depth_list(self.path / "depth.txt")
+        self._intrinsics = intrinsics
+        self._scale = depth_scale
+        default = self.path / "groundtruth.txt"
+        self.pose_spec: PoseSourceSpec = parse_pose_source(pose_source or f"tum:{default}")
+        if self.pose_spec.kind not in ("tum", "none"):
+            raise PlayerError(
+                f"a TUM folder has no {self.pose_spec.kind} topics: use --pose-source "
+                f"tum:FILE (default {default}) or none"
+            )
+        if self.pose_spec.path is not None and not self.pose_spec.path.is_file():
+            raise PlayerError(f"trajectory {self.pose_spec.path} not found; use --pose-source")
+        self.sensor_topic = "depth.txt"
+        self.sensor_type = SENSOR_TYPE
+        self.base_frame = OPTICAL_FRAME
+        self.warnings: list[str] = []
+        self._track: PoseTrack | None = None
+        if self.pose_spec.path is not None:
+            self._track = load_tum(self.pose_spec.path, child=OPTICAL_FRAME)
+        first = read_depth_png(self.entries[0][1], depth_scale)
+        self.size: tuple[int, int] = first.shape  # type: ignore[assignment]
+        if self._track is None:
+            self.placement = unlevelled(self.base_frame)
+        else:
+            self.placement = survey(list(self.samples()), self.base_frame, mode=level,
+                                    floor_z=floor_z)  # fmt: skip
+
+    def pose_at(self, stamp: float) -> Pose | None:
+        """The camera's 6-DoF pose at a stamp, or None where the trajectory does not cover it."""
+        return None if self._track is None else self._track.at(stamp, tolerance=POSE_TOLERANCE)
+
+    def _points(self, index: int, rows: slice = slice(None)) -> np.ndarray:
+        depth = read_depth_png(self.entries[index][1], self._scale)
+        if depth.shape != self.size:
+            raise PlayerError(
+                f"{self.entries[index][1]} is {depth.shape[1]}x{depth.shape[0]}, the first "
+                f"image {self.size[1]}x{self.size[0]}"
+            )
+        return back_project(depth[rows], self.size, self._intrinsics, rows)
+
+    def samples(self) -> Iterator[Sample]:
+        """Up to SURVEY_FRAMES frames spread over the folder, with their poses."""
+        step = max(1, len(self.entries) // SURVEY_FRAMES)
+        for index in range(0, len(self.entries), step):
+            pose = self.pose_at(self.entries[index][0])
+            if pose is not None:
+                yield Sample(self._points(index), pose.matrix, OPTICAL_FRAME)
+
+    def frames(
+        self,
+        rows: RowSelection | None = None,
+        start: float | None = None,
+        stop: float | None = None,
+    ) -> Iterator[tuple[SensorFrame, Pose | None]]:
+        """Yield every depth image as (SensorFrame, pose at its stamp or None), in time order.
+
+        Args:
+            rows: As for ``BagSource.frames``: only what this selection picks, or everything.
+            start: Seconds from the first frame: the first frame then or later.
+            stop: Seconds from the first frame: frames before it only.
+        """
+        begin = self.entries[0][0]
+        band = None if rows is None else rows.band or self.placement.band or DEFAULT_BAND
+        for index, (stamp, _) in enumerate(self.entries):
+            offset = stamp - begin
+            if (start is not None and offset < start) or (stop is not None and offset >= stop):
+                continue
+            pose, mount = self.placement.place(self.pose_at(stamp), np.eye(4))
+            stacked = None
+            if rows is None:
+                points = self._points(index)
+            else:
+                points = pick_points(
+                    self._points(index, rows_to_search(rows, self.size[0])), mount, band
+                )
+                stacked = band if points.shape[0] > 1 else None
+            frame = SensorFrame(
+                stamp, OPTICAL_FRAME, np.ascontiguousarray(points, dtype=np.float32), mount,
+                offset, stacked,
+            )  # fmt: skip
+            yield frame, pose
+
+    @property
+    def frame_count(self) -> int:
+        """Number of depth images."""
+        return len(self.entries)
+
+    def __len__(self) -> int:
+        """Number of depth images (``frame_count``)."""
+        return self.frame_count
+
+    @property
+    def duration(self) -> float:
+        """Time between the first and last depth image, seconds."""
+        return self.entries[-1][0] - self.entries[0][0]
+
+    def close(self) -> None:
+        """Nothing stays open between frames."""
+
+    def __enter__(self) -> Self:
+        """Use as ``with TumFolder(path) as source:``, as a bag."""
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        """Nothing to close."""

@@ -1,0 +1,96 @@
+"""Per image column, the point on something that rises through the band: walls, not clutter."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wallmap.common.scan_row import (
+    STACK,
+    RowSelection,
+    band_stack,
+    free_rays,
+    select_points,
+    upright_points,
+)
+
+BAND = (0.9, 1.5)
+HEIGHTS = np.linspace(BAND[0], BAND[1], STACK, endpoint=False) + 0.05  # the stack's targets
+WIDTH = 40
+
+
+def stack_of(surfaces) -> np.ndarray:
+    """A stack (base frame = sensor frame) from per column and level the distance hit."""
+    ys = np.linspace(-1.0, 1.0, WIDTH)
+    stack = np.full((STACK, WIDTH, 3), np.nan, np.float32)
+    for level, height in enumerate(HEIGHTS):
+        for column, y in enumerate(ys):
+            x = surfaces(level, column)
+            if x is not None:
+                stack[level, column] = (x, y, height)
+    return stack
+
+
+def test_a_wall_is_kept_at_every_column() -> None:
+    row = upright_points(stack_of(lambda level, column: 3.0), np.eye(4))
+    assert np.isfinite(row).all()
+    np.testing.assert_allclose(row[:, 0], 3.0)
+
+
+def test_a_kettle_in_front_of_the_wall_gives_way_to_the_wall_seen_above_it() -> None:
+    def scene(level, column):
+        return 2.0 if 10 <= column < 20 and level < 2 else 3.0
+
+    row = upright_points(stack_of(scene), np.eye(4))
+    np.testing.assert_allclose(row[:, 0], 3.0)
+
+
+def test_a_box_that_does_not_reach_the_top_of_what_is_seen_is_no_wall() -> None:
+    """Columns 10-19 see a 0.3 m box at 2 m and, above it, open space up to a far wall."""
+
+    def scene(level, column):
+        if 10 <= column < 20:
+            return 2.0 if level < 3 else 4.0
+        return 4.0
+
+    row = upright_points(stack_of(scene), np.eye(4))
+    assert not np.any(np.isclose(row[:, 0], 2.0)), "the box is not taken for a wall"
+    assert np.isfinite(row[:10, 0]).all()
+
+
+def test_a_level_surface_alone_among_walls_is_dropped() -> None:
+    """A counter top seen at one height only, in columns where other heights see the wall."""
+
+    def scene(level, column):
+        if 10 <= column < 20 and level == 0:
+            return 1.2  # the front edge of a counter top, in the band's lowest slice
+        return 3.0
+
+    row = upright_points(stack_of(scene), np.eye(4))
+    assert not np.any(np.isclose(row[:, 0], 1.2))
+    np.testing.assert_allclose(row[:, 0], 3.0)
+
+
+def test_a_whole_cloud_and_the_players_stack_give_the_same_row() -> None:
+    rng = np.random.default_rng(0)
+    cloud = np.full((64, WIDTH, 3), np.nan, np.float32)
+    heights = np.linspace(2.2, 0.2, 64)
+    cloud[..., 0] = 3.0 + rng.normal(0, 0.003, (64, WIDTH))
+    cloud[..., 1] = np.linspace(-1, 1, WIDTH)
+    cloud[..., 2] = heights[:, None]
+    how = RowSelection(band=BAND)
+    stack = band_stack(cloud, np.eye(4), BAND)
+    np.testing.assert_array_equal(
+        select_points(cloud, np.eye(4), how), select_points(stack, np.eye(4), how, stacked=True)
+    )
+
+
+def test_free_rays_end_at_the_farthest_return_of_each_column() -> None:
+    def scene(level, column):
+        return 2.0 if level < 3 else 4.0
+
+    mount = np.eye(4)
+    mount[:2, 3] = (0.1, 0.0)
+    origin, ends = free_rays(stack_of(scene), mount)
+    np.testing.assert_allclose(origin, (0.1, 0.0))
+    assert len(ends) == WIDTH
+    np.testing.assert_allclose(ends[:, 0], 4.1)  # shifted by the mount, like every point
