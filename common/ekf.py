@@ -91,6 +91,41 @@ def fuse(
     return p @ (info_a @ s_a + info_b @ z), 0.5 * (p + p.T)
 
 
+def line_jacobian(s: Array) -> Array:
+    """The Jacobian d s / d (rho, theta) of a line's closest point s = rho (cos theta, sin theta).
+
+    The columns move the line across itself (its offset) and turn it about its foot point.
+    """
+    rho = float(np.linalg.norm(s))
+    n = s / rho
+    return np.column_stack([n, rho * wall_model.direction(s)])
+
+
+def line_agreement(
+    s_a: Array,
+    p_a: Array,
+    anchor_a: Array,
+    s_b: Array,
+    p_b: Array,
+    anchor_b: Array,
+    floor: tuple[float, float],
+) -> float:
+    """How well two wall estimates agree on one line: the squared Mahalanobis distance.
+
+    Wall ``b`` is re-expressed as its closest point to ``a``'s anchor (as in :func:`fuse`); the
+    difference is weighed by both covariances and by ``floor`` (offset m, angle rad) standard
+    deviations: real walls are not perfectly straight, and an estimate seen a thousand times is
+    not a thousand times surer of that. Compare with ``CHI2_2DOF_999``.
+    """
+    at_a = np.array([anchor_a[0], anchor_a[1], 0.0])
+    z = wall_model.predict(s_b, anchor_b, at_a)
+    j = wall_model.jacobian_state(s_b, anchor_b, at_a)
+    lines = line_jacobian(s_a)
+    spread = lines @ np.diag(np.square(floor)) @ lines.T
+    d = s_a - z
+    return float(d @ np.linalg.solve(p_a + j @ p_b @ j.T + spread, d))
+
+
 def initial_state(z: Array, r: Array, pose: Array, pose_cov: Array) -> tuple[Array, Array, Array]:
     """A new wall from one observation: ``(s, P, anchor)``."""
     s, anchor, ds_dz, ds_dpose = wall_model.from_observation(z, pose)

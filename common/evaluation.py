@@ -13,6 +13,10 @@ present, are the parts of the extent seen between doors. The rules:
 * recall = true non-glass walls seen in at least ``min_frames`` frames and matched /
   such walls (1 if none).
 * duplicates = true walls matched by two or more mapped walls.
+* A true wall here is a physical wall: pieces of the plan on one line with at most 3 m between
+  them (a wall with a doorway, which the plans give as two pieces) count as one wall, matched
+  by any mapped wall matching one of its pieces (``physical_walls``). One mapped wall spanning
+  the doorway matches it once; two mapped pieces either side are a duplicate.
 * For each matched true wall its best match (smallest offset) gives an angle, an offset
   and an end-point error; their medians are reported (NaN if nothing matched).
 * The end-point error of a match is the mean, over the mapped wall's two end points, of
@@ -144,6 +148,45 @@ def endpoint_error(wall: Mapping[str, Any], truth: Wall) -> float:
     )
 
 
+ONE_LINE_ANGLE = math.radians(0.1)  # true pieces this close to parallel...
+ONE_LINE_OFFSET = 0.01  # ...and this close to one line...
+ONE_LINE_GAP = 3.0  # ...and this close along it are one physical wall (a door or window between)
+
+
+def physical_walls(plan: FloorPlan) -> list[list[Wall]]:
+    """The plan's solid walls grouped into physical walls: pieces of one line across gaps.
+
+    The generated plans give a wall with a doorway as two pieces, and the map models a door as
+    a gap between the segments of one wall; scoring counts the two pieces as one wall, so that
+    one mapped wall spanning the door matches it once and two mapped pieces are a duplicate.
+    """
+    solid = [w for w in plan.walls if not w.glass]
+    groups: list[list[Wall]] = []
+    for wall in solid:
+        for group in groups:
+            if any(_one_line(wall, other) for other in group):
+                group.append(wall)
+                break
+        else:
+            groups.append([wall])
+    return groups
+
+
+def _one_line(a: Wall, b: Wall) -> bool:
+    """Two true pieces on one line with at most ``ONE_LINE_GAP`` between them."""
+    pa, pb = np.array([a.p0, a.p1], dtype=float), np.array([b.p0, b.p1], dtype=float)
+    along = (pa[1] - pa[0]) / np.linalg.norm(pa[1] - pa[0])
+    other = (pb[1] - pb[0]) / np.linalg.norm(pb[1] - pb[0])
+    if abs(float(along[0] * other[1] - along[1] * other[0])) > math.sin(ONE_LINE_ANGLE):
+        return False
+    normal = np.array([-along[1], along[0]])
+    if np.abs((pb - pa[0]) @ normal).max() > ONE_LINE_OFFSET:
+        return False
+    ta, tb = (pa - pa[0]) @ along, (pb - pa[0]) @ along
+    gap = max(tb.min() - ta.max(), ta.min() - tb.max())
+    return gap <= ONE_LINE_GAP
+
+
 def evaluate_map(
     mapped: Sequence[Mapping[str, Any]],
     plan: FloorPlan,
@@ -166,27 +209,34 @@ def evaluate_map(
     Returns:
         The score.
     """
-    solid = [w for w in plan.walls if not w.glass]
-    # Best (smallest offset) match per true wall as (angle, offset, end-point error), and
-    # how many mapped walls match it.
+    groups = physical_walls(plan)
+    # Best (smallest offset) match per physical wall as (angle, offset, end-point error), and
+    # how many mapped walls match it (a mapped wall matching two of its pieces counts once).
     best: dict[int, tuple[float, float, float]] = {}
-    match_count = dict.fromkeys((w.id for w in solid), 0)
+    match_count = dict.fromkeys(range(len(groups)), 0)
     unmatched_mapped: list[Any] = []
     for index, wall in enumerate(mapped):
         matched = False
-        for truth in solid:
-            errors = match_errors(wall, truth)
-            if errors is None or errors[0] > max_angle_deg or errors[1] > max_offset:
-                continue
-            matched = True
-            match_count[truth.id] += 1
-            if truth.id not in best or errors[1] < best[truth.id][1]:
-                best[truth.id] = (*errors, endpoint_error(wall, truth))
+        for group, pieces in enumerate(groups):
+            hit = False
+            for truth in pieces:
+                errors = match_errors(wall, truth)
+                if errors is None or errors[0] > max_angle_deg or errors[1] > max_offset:
+                    continue
+                hit = True
+                if group not in best or errors[1] < best[group][1]:
+                    best[group] = (*errors, endpoint_error(wall, truth))
+            matched |= hit
+            match_count[group] += int(hit)
         if not matched:
             unmatched_mapped.append(wall.get("id", index))
 
-    required = [w.id for w in solid if seen_counts.get(w.id, 0) >= min_frames]
-    unmatched_true = [i for i in required if i not in best]
+    required = [
+        group
+        for group, pieces in enumerate(groups)
+        if max(seen_counts.get(w.id, 0) for w in pieces) >= min_frames
+    ]
+    unmatched_true = [groups[i][0].id for i in required if i not in best]
     n_mapped_matched = len(mapped) - len(unmatched_mapped)
     n_true_matched = len(required) - len(unmatched_true)
     angles = [e[0] for e in best.values()]

@@ -6,6 +6,7 @@ The scenes are generated with seeds that were never used to tune the detector or
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from wallmap.common.evaluation import evaluate_map
@@ -17,6 +18,8 @@ CASES = [
     pytest.param(101, "ros1", "pointcloud", "non-manhattan", id="ros1-pointcloud2"),
     pytest.param(202, "ros2-mcap", "depth16", "non-manhattan", id="ros2-mcap-depth16"),
     pytest.param(303, "ros1", "depth16", "noisy", id="ros1-depth16-doubled-noise"),
+    pytest.param(404, "ros1", "depth16", "window", id="ros1-depth16-windows"),
+    pytest.param(505, "ros2-mcap", "pointcloud", "junction", id="ros2-mcap-t-at-the-origin"),
 ]
 
 
@@ -49,4 +52,24 @@ def test_generated_scene_is_mapped_accurately(stack, tmp_path, seed, fmt, sensor
     assert score.duplicates == 0
     assert score.median_angle_deg <= 0.5
     assert score.median_offset_m <= 0.02
-    assert score.median_endpoint_m <= 0.10
+    if kind == "junction":
+        assert_t_at_the_origin(reply["walls"], scene.plan)
+    else:  # the junction's 12 m outer wall ends where the camera never looks
+        assert score.median_endpoint_m <= 0.10
+
+
+def assert_t_at_the_origin(walls, plan) -> None:
+    """The outer wall through the origin is one wall across the T; the divider ends there."""
+    outer = plan.walls[0]
+    along = np.subtract(outer.p1, outer.p0) / outer.length
+    normal = np.array([-along[1], along[0]])
+    on_outer = [
+        w for w in walls
+        if abs(normal @ np.asarray(w["p0"])) < 0.05 and abs(normal @ np.asarray(w["p1"])) < 0.05
+    ]  # fmt: skip
+    assert len(on_outer) == 1, "one wall, not cut at the junction"
+    positions = np.asarray(on_outer[0]["segments"]).reshape(-1, 2) @ along
+    assert positions.min() < -2.0
+    assert positions.max() > 2.0
+    ends = [np.linalg.norm(np.asarray([w["p0"], w["p1"]]), axis=1).min() for w in walls]
+    assert min(ends) < 0.03, "the divider ends at the origin, on the outer wall"

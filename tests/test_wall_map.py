@@ -74,10 +74,18 @@ def test_every_wall_is_mapped_once_and_accurately():
     rng = np.random.default_rng(5)
     wall_map = build_map(rng)
     walls = wall_map.reply(MapQuery(min_obs=3))["walls"]
-    assert len(walls) == len(WALLS), [w["n_obs"] for w in walls]
+    # The two pieces either side of the doorway are one wall, its segments showing the door.
+    assert len(walls) == len(WALLS) - 1, [w["n_obs"] for w in walls]
     for p0, p1 in WALLS:
         errors = [line_error(w, p0, p1) for w in walls]
         assert min(errors) < 0.01
+    door = min(walls, key=lambda w: line_error(w, *WALLS[2]))
+    assert line_error(door, *WALLS[3]) < 0.01
+    segments = np.array(door["segments"])
+    assert len(segments) == 2
+    lows, highs = segments[:, :, 0].min(axis=1), segments[:, :, 0].max(axis=1)
+    assert highs.min() < -0.4, "the doorway between x = -0.6 and 0.6 stays open"
+    assert lows.max() > 0.4
     assert wall_map.frames == 300
 
 

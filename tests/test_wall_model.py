@@ -151,3 +151,36 @@ def test_ekf_converges_and_is_consistent():
         assert np.linalg.norm(err) < 0.02
     # Normalised estimation error squared averages the state dimension when P is honest.
     assert 1.0 < np.mean(nees) < 3.5
+
+
+def test_the_line_jacobian_matches_numeric_differentiation():
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        rho, theta = rng.uniform(0.3, 6.0), rng.uniform(-np.pi, np.pi)
+        s = rho * np.array([np.cos(theta), np.sin(theta)])
+        numeric = numeric_jacobian(lambda x: x[0] * np.array([np.cos(x[1]), np.sin(x[1])]),
+                                   np.array([rho, theta]))  # fmt: skip
+        np.testing.assert_allclose(ekf.line_jacobian(s), numeric, atol=1e-6)
+
+
+def test_two_estimates_of_one_line_agree_and_of_two_lines_do_not():
+    """The same line estimated from anchors 6 m apart, against one 5 cm or 2 degrees off."""
+    anchor_a, anchor_b = np.array([0.0, -1.0]), np.array([6.0, -1.5])
+    cov = np.diag([0.003**2, 0.003**2])  # a wall seen a few dozen times
+
+    def state(anchor, offset=0.0, turn=0.0):
+        normal = np.array([-np.sin(turn), np.cos(turn)])
+        rho = 2.0 + offset - normal @ anchor  # the line n . p = 2 + offset, seen from anchor
+        return rho * normal
+
+    floor = (0.01, np.radians(0.5))
+    same = ekf.line_agreement(state(anchor_a), cov, anchor_a, state(anchor_b), cov, anchor_b, floor)
+    assert same < 1e-9
+    for other in (state(anchor_b, offset=0.05), state(anchor_b, turn=np.radians(2.0))):
+        chi2 = ekf.line_agreement(state(anchor_a), cov, anchor_a, other, cov, anchor_b, floor)
+        assert chi2 > ekf.CHI2_2DOF_999
+    loose = np.diag([0.05**2, 0.05**2])
+    near = ekf.line_agreement(
+        state(anchor_a), loose, anchor_a, state(anchor_b, offset=0.05), loose, anchor_b, floor
+    )
+    assert near < ekf.CHI2_2DOF_999, "uncertain estimates may be one line"

@@ -36,13 +36,18 @@ Layout = Literal["rooms", "corridor"]
 
 @dataclass(frozen=True)
 class Wall:
-    """A vertical wall of zero thickness, seen from both sides, from the floor up to ``height``."""
+    """A vertical wall of zero thickness, seen from both sides, from the floor up to ``height``.
+
+    ``windows`` are glass panes in it, ``(start, end, bottom, top)``: metres along the wall
+    from ``p0``, and heights above the floor. The wall is one wall, window or not.
+    """
 
     id: int
     p0: Point
     p1: Point
     glass: bool = False
     height: float = 2.6
+    windows: tuple[tuple[float, float, float, float], ...] = ()
 
     @property
     def length(self) -> float:
@@ -96,6 +101,7 @@ class FloorPlan:
                     "p1": list(w.p1),
                     "glass": w.glass,
                     "height": w.height,
+                    **({"windows": [list(p) for p in w.windows]} if w.windows else {}),
                 }
                 for w in self.walls
             ],
@@ -123,6 +129,10 @@ class FloorPlan:
                     p1=_point(w["p1"]),
                     glass=bool(w["glass"]),
                     height=float(w["height"]),
+                    windows=tuple(
+                        (float(a), float(b), float(c), float(d))
+                        for a, b, c, d in w.get("windows", ())
+                    ),
                 )
                 for w in data["walls"]
             ),
@@ -759,3 +769,59 @@ def with_counters(plan: FloorPlan, seed: int, counters: int = 3) -> FloorPlan:
                 furniture.append(Furniture(_point(centre), size, yaw, height, COUNTER_HEIGHT))
             break
     return FloorPlan(plan.walls, tuple(furniture), plan.ceiling_height, plan.route)
+
+
+WINDOW = (2.0, 0.8, 2.3)  # m: width, bottom and top of a window pane (across the whole band)
+
+
+def with_windows(plan: FloorPlan, seed: int, windows: int = 3) -> FloorPlan:
+    """The plan with a 2 m glass window, 0.8-2.3 m above the floor, in some long walls.
+
+    The detector sees no return through glass, so such a wall is seen as two pieces with a
+    2 m gap in its band: the map has to make one wall of them.
+    """
+    rng = np.random.default_rng(seed)
+    width, bottom, top = WINDOW
+    candidates = [w for w in plan.walls if not w.glass and w.length >= width + 2.0]
+    chosen = set(rng.permutation([w.id for w in candidates])[:windows].tolist())
+    walls = []
+    for wall in plan.walls:
+        pane = ()
+        if wall.id in chosen:
+            start = float(rng.uniform(1.0, wall.length - width - 1.0))
+            pane = ((start, start + width, bottom, top),)
+        walls.append(Wall(wall.id, wall.p0, wall.p1, wall.glass, wall.height, pane))
+    return FloorPlan(tuple(walls), plan.furniture, plan.ceiling_height, plan.route)
+
+
+def junction_plan(seed: int) -> FloorPlan:
+    """Two rooms side by side, the wall between them meeting the outer wall in a T at the origin.
+
+    The outer wall runs 12 m straight through the map origin; the dividing wall stands on it
+    at the origin with a 1.6 m doorway (two pieces, as a wall with a doorway is in these
+    plans); the route crosses from one room to the other through it, looking at the outer wall
+    from both sides of the T. The whole plan is turned by a random angle about the origin.
+    """
+    rng = np.random.default_rng(seed)
+    depth = float(rng.uniform(4.5, 5.5))
+    door = float(rng.uniform(1.4, 2.2))
+    height = float(rng.uniform(2.5, 3.0))
+    segments = [
+        ((-6.0, 0.0), (6.0, 0.0)),  # the outer wall, through the origin
+        ((0.0, 0.0), (0.0, door)),  # the divider: a T at the origin...
+        ((0.0, door + 1.6), (0.0, depth)),  # ...with a doorway
+        ((-6.0, depth), (6.0, depth)),
+        ((-6.0, 0.0), (-6.0, depth)),
+        ((6.0, 0.0), (6.0, depth)),
+    ]
+    middle = door + 0.8
+    route = [(-4.5, depth - 1.2), (-3.5, 1.2), (-1.2, middle), (1.2, middle), (3.5, 1.2),
+             (4.5, depth - 1.2)]  # fmt: skip
+    angle = float(rng.uniform(-math.pi, math.pi))
+    c, s = math.cos(angle), math.sin(angle)
+
+    def turn(p: Sequence[float]) -> Point:
+        return (c * p[0] - s * p[1], s * p[0] + c * p[1])
+
+    walls = tuple(Wall(i, turn(p), turn(q), height=height) for i, (p, q) in enumerate(segments))
+    return FloorPlan(walls, (), height, tuple(turn(p) for p in route))

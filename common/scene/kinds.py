@@ -8,7 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .floorplan import FloorPlan, Layout, generate_floorplan, with_counters
+from .floorplan import (
+    FloorPlan,
+    Layout,
+    generate_floorplan,
+    junction_plan,
+    with_counters,
+    with_windows,
+)
 from .render import Camera
 
 
@@ -24,6 +31,8 @@ class SceneKind:
         furniture_per_room: Boxes per room, all below the detector's height band.
         pillars_per_room: Free-standing 0.3 m pillars per room (four short walls each).
         counters: Kitchen counters with appliances on them, along walls (``with_counters``).
+        windows: Walls with a 2 m glass window across the band (``with_windows``).
+        junction: The plan is ``junction_plan``'s (a T at the map origin), not a generated one.
         camera: Depth camera and mount.
     """
 
@@ -34,10 +43,14 @@ class SceneKind:
     furniture_per_room: int = 2
     pillars_per_room: int = 0
     counters: int = 0
+    windows: int = 0
+    junction: bool = False
     camera: Camera = field(default_factory=Camera)
 
     def plan(self, seed: int) -> FloorPlan:
         """The plan of this kind for ``seed``; the same seed always gives the same plan."""
+        if self.junction:
+            return junction_plan(seed)
         plan = generate_floorplan(
             seed,
             layout=self.layout,
@@ -45,6 +58,8 @@ class SceneKind:
             furniture_per_room=self.furniture_per_room,
             pillars_per_room=self.pillars_per_room,
         )
+        if self.windows:
+            plan = with_windows(plan, seed, self.windows)
         return with_counters(plan, seed, self.counters) if self.counters else plan
 
 
@@ -67,6 +82,21 @@ SCENE_KINDS: dict[str, SceneKind] = {
             "kitchen",
             "counters along the walls with appliances standing on them, up to 1.35 m",
             counters=4,
+        ),
+        SceneKind(
+            "window",
+            "3 walls with a 2 m glass window across the band: one wall each, not two pieces",
+            windows=3,
+        ),
+        SceneKind(
+            "junction",
+            "two rooms, their divider meeting the outer wall in a T at the map origin",
+            junction=True,
+        ),
+        SceneKind(
+            "pitched",
+            "default plan, a 640x480 camera pitched down 10 degrees (its band adapts)",
+            camera=Camera(width=640, height=480, tilt_deg=-10.0),
         ),
         SceneKind(
             "noisy",

@@ -13,7 +13,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from .floorplan import FloorPlan, point_segment_distance
+from .floorplan import FloorPlan, Point, Wall, point_segment_distance
 
 # Optical frame (z forward, x right, y down) expressed in camera_link (x forward, z up).
 R_LINK_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -175,12 +175,15 @@ class _Geometry:
 
 @lru_cache(maxsize=8)
 def _geometry(plan: FloorPlan) -> _Geometry:
-    starts = [w.p0 for w in plan.walls]
-    ends = [w.p1 for w in plan.walls]
-    tops = [w.height for w in plan.walls]
-    bottoms = [0.0] * len(plan.walls)
-    labels = [w.id for w in plan.walls]
-    glass = [w.glass for w in plan.walls]
+    starts, ends, tops, bottoms, labels, glass = [], [], [], [], [], []
+    for wall in plan.walls:
+        for p, q, bottom, top, pane in _wall_quads(wall):
+            starts.append(p)
+            ends.append(q)
+            bottoms.append(bottom)
+            tops.append(top)
+            labels.append(wall.id)
+            glass.append(wall.glass or pane)
     for box in plan.furniture:
         corners = box.corners()
         starts.extend(corners.tolist())
@@ -204,6 +207,28 @@ def _geometry(plan: FloorPlan) -> _Geometry:
         box_half=np.array([b.size for b in plan.furniture], dtype=float).reshape(-1, 2) / 2,
         box_top=np.array([b.height for b in plan.furniture], dtype=float),
     )
+
+
+def _wall_quads(wall: Wall) -> list[tuple[Point, Point, float, float, bool]]:
+    """A wall as vertical quads (start, end, bottom, top, glass): solid around its windows."""
+    if not wall.windows:
+        return [(wall.p0, wall.p1, 0.0, wall.height, False)]
+    p0, p1 = np.asarray(wall.p0, float), np.asarray(wall.p1, float)
+    along = (p1 - p0) / wall.length
+
+    def at(t: float) -> Point:
+        x, y = p0 + along * t
+        return (float(x), float(y))
+
+    quads, done = [], 0.0
+    for start, end, bottom, top in sorted(wall.windows):
+        quads.append((at(done), at(start), 0.0, wall.height, False))
+        quads.append((at(start), at(end), 0.0, bottom, False))
+        quads.append((at(start), at(end), bottom, top, True))
+        quads.append((at(start), at(end), top, wall.height, False))
+        done = end
+    quads.append((at(done), wall.p1, 0.0, wall.height, False))
+    return [q for q in quads if math.dist(q[0], q[1]) > 1e-9 and q[3] > q[2]]
 
 
 def _nearest_vertical(

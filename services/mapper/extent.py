@@ -26,6 +26,8 @@ BIN = 0.05  # m
 MIN_HITS = 2  # observations that make a bin part of the wall (when the wall has that many)
 MAX_GAP = 0.3  # m: gaps up to this inside a segment are noise, not a door
 MIN_THROUGH = 2  # rays through a bin before it can be free space
+THROUGH_REACH = 3.0  # m past the extent where rays are counted too: what was seen of a gap
+PIECE = 4  # bins (20 cm) in which a gap's being seen through is judged
 
 
 class Extent:
@@ -55,13 +57,38 @@ class Extent:
         self.revision += 1
 
     def add_through(self, points: Array) -> int:
-        """Count rays that crossed the wall's line at map points; returns how many fell inside."""
-        bins = np.floor(self.along(points) / BIN).astype(int) - self.first
-        bins = bins[(bins >= 0) & (bins < len(self.counts))]
+        """Count rays that crossed the wall's line at map points; how many were counted.
+
+        Counted on the extent and up to ``THROUGH_REACH`` past its ends: what was seen of the
+        gaps around the wall.
+        """
+        if not len(self.counts):
+            return 0
+        bins = np.floor(self.along(points) / BIN).astype(int)
+        reach = round(THROUGH_REACH / BIN)
+        last = self.first + len(self.counts) - 1
+        bins = bins[(bins >= self.first - reach) & (bins <= last + reach)]
         if len(bins):
-            np.add.at(self.through, bins, 1)
+            self._cover(int(bins.min()), int(bins.max()))
+            np.add.at(self.through, bins - self.first, 1)
             self.revision += 1
         return len(bins)
+
+    def seen_through(self, start: float, end: float) -> float:
+        """Share of the stretch between two positions on the axis that rays crossed.
+
+        Counted in 20 cm pieces (a ray in a piece counts for it): a depth camera's rays in
+        the band are a few centimetres apart at a few metres, and not every bin gets one.
+        """
+        lo, hi = math.floor(start / BIN) - self.first, math.ceil(end / BIN) - self.first
+        crossed = np.zeros(max(hi - lo, 1), dtype=bool)
+        inside = slice(max(lo, 0), max(min(hi, len(self.through)), 0))
+        part = self.through[inside] > 0
+        crossed[inside.start - lo : inside.start - lo + len(part)] = part
+        pieces = -(-len(crossed) // PIECE)
+        padded = np.zeros(pieces * PIECE, dtype=bool)
+        padded[: len(crossed)] = crossed
+        return float(padded.reshape(pieces, PIECE).any(axis=1).mean())
 
     def free(self) -> NDArray[np.bool_]:
         """Bins seen through in more frames than the wall was seen there: no wall."""

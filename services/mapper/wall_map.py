@@ -30,6 +30,8 @@ NEAR_LINE = 1.0  # m: farther lines are never candidates for an observation
 THROUGH_MARGIN = 0.1  # m: a ray ends this far past a wall (plus its noise) to cross it
 THROUGH_NOISE = 3e-3  # m per m^2 of range: 3 sigma of a depth camera's range noise, a little more
 THROUGH_NEAR = 0.3  # m from the sensor: nearer crossings are not counted
+CROSSING_ANGLE = math.radians(30.0)  # a wall at least this far from parallel may cross a gap
+CROSSING_REACH = 0.2  # m it must reach past the line on both sides: a T only meets it
 SEEN_THROUGH = 0.5  # a wall seen through along this share of its length is none
 
 
@@ -70,6 +72,14 @@ class MapperConfig:
         shadow_offset: see above.
         shadow_ratio: see above.
         shadow_cover: see above.
+        merge_gap: two confirmed walls on one line (their estimates agree, see
+            ``line_agreement``) separated along it by at most this (m) are one wall with a gap:
+            a door, a window, an occlusion...
+        door_width: ...but one with a gap wider than a door that the sensor saw through (rays
+            crossing the gap well before they ended) is two walls; so are two whose gap a wall
+            crosses.
+        line_floor: offset (m) and angle (rad) standard deviations added to both estimates when
+            testing whether two walls are on one line: walls are not perfectly straight.
         fan_angle: of two confirmed walls within this angle (rad)...
         fan_offset: ...and this distance (m) whose segments overlap by more than...
         fan_overlap: ...this (m), only the one seen more often is served (see ``_fanned``).
@@ -95,6 +105,9 @@ class MapperConfig:
     shadow_offset: float = 0.10
     shadow_ratio: float = 2.0
     shadow_cover: float = 0.7
+    merge_gap: float = 3.0
+    door_width: float = 1.8
+    line_floor: tuple[float, float] = (0.01, float(np.radians(0.5)))
     fan_angle: float = np.radians(8.0)
     fan_offset: float = 0.30
     fan_overlap: float = 0.3
@@ -179,6 +192,15 @@ def _end_near(ends: list[float], px: float, py: float, reach: float) -> int | No
     d0, d1 = math.hypot(x0 - px, y0 - py), math.hypot(x1 - px, y1 - py)
     best, distance = (0, d0) if d0 <= d1 else (1, d1)
     return best if distance <= reach else None
+
+
+def _passes(ends: list[float], px: float, py: float, margin: float) -> bool:
+    """Whether point (px, py), on a wall's line, lies between its ends, ``margin`` inside."""
+    x0, y0, x1, y1 = ends
+    dx, dy = x1 - x0, y1 - y0
+    length = math.hypot(dx, dy)
+    along = ((px - x0) * dx + (py - y0) * dy) / max(length, 1e-12)
+    return margin < along < length - margin
 
 
 def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
@@ -395,27 +417,86 @@ class WallMap:
         return self._merge_duplicates(wall, stamp).id
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
-        """Merge walls that have converged onto ``wall``'s line over a shared extent."""
-        for other in self._near(wall.ends, max_gap=0.0):
-            if other.id in self.walls and other is not wall and self._same_wall(wall, other):
-                keep, gone = (wall, other) if wall.id < other.id else (other, wall)
-                keep.set_state(*ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor))
-                keep.extend(gone.ends)
-                keep.extent.absorb(gone.extent)
-                keep.n_obs += gone.n_obs
-                keep.depth_obs += gone.depth_obs
-                keep.views += gone.views
-                keep.first_seen = min(keep.first_seen, gone.first_seen)
-                keep.last_seen = max(keep.last_seen, gone.last_seen)
-                del self.walls[gone.id]
-                self.index.remove(gone.id)
-                self.index.file(keep.id, keep.ends)
-                self.merges.append((gone.id, keep.id, stamp))
-                self.changed.discard(gone.id)
-                self.removed.add(gone.id)
-                self.changed.add(keep.id)
-                wall = keep
+        """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""
+        gap = self.config.merge_gap
+        reach = wall.ends + np.array([-1.0, 1.0])[:, None] * gap * wall.direction
+        for other in self._near(reach, max_gap=0.0):
+            if other.id not in self.walls or other is wall or wall.id not in self.walls:
+                continue
+            ta, tb = wall.along(wall.ends), wall.along(other.ends)
+            overlap = min(ta.max(), tb.max()) >= max(ta.min(), tb.min())
+            if self._same_wall(wall, other) if overlap else self._continues(wall, other):
+                wall = self._absorb(wall, other, stamp)
         return wall
+
+    def _absorb(self, a: Wall, b: Wall, stamp: float) -> Wall:
+        """Make two walls one: the older id survives, the merge is reported."""
+        keep, gone = (a, b) if a.id < b.id else (b, a)
+        keep.set_state(*ekf.fuse(keep.s, keep.p, keep.anchor, gone.s, gone.p, gone.anchor))
+        keep.extend(gone.ends)
+        keep.extent.absorb(gone.extent)
+        keep.n_obs += gone.n_obs
+        keep.depth_obs += gone.depth_obs
+        keep.views += gone.views
+        keep.first_seen = min(keep.first_seen, gone.first_seen)
+        keep.last_seen = max(keep.last_seen, gone.last_seen)
+        del self.walls[gone.id]
+        self.index.remove(gone.id)
+        self.index.file(keep.id, keep.ends)
+        self.merges.append((gone.id, keep.id, stamp))
+        self.changed.discard(gone.id)
+        self.removed.add(gone.id)
+        self.changed.add(keep.id)
+        return keep
+
+    def _continues(self, a: Wall, b: Wall) -> bool:
+        """Whether ``b`` is ``a`` on the far side of a gap: one wall with a door or a window.
+
+        Both confirmed and seen twice as often as that, their extents apart by at most
+        ``merge_gap``, their lines within
+        ``merge_angle`` and ``merge_offset`` at the gap and statistically one line (the
+        estimates and their covariances, with ``line_floor``), no wall crossing the line in the
+        gap, and a gap wider than ``door_width`` not seen through.
+        """
+        cfg = self.config
+        settled = 2 * cfg.confirm_obs  # a merge is for good: decide it on settled estimates
+        if not (a.confirmed(cfg) and b.confirmed(cfg)) or min(a.n_obs, b.n_obs) < settled:
+            return False
+        ta, tb = a.along(a.ends), a.along(b.ends)
+        gap_start, gap_end = (ta.max(), tb.min()) if ta.max() < tb.min() else (tb.max(), ta.min())
+        if gap_end - gap_start > cfg.merge_gap:
+            return False
+        if np.arccos(min(abs(float(a.normal @ b.normal)), 1.0)) > cfg.merge_angle:
+            return False
+        ends = a.on_line(np.array([gap_start, gap_end]))
+        middle = 0.5 * (ends[0] + ends[1])
+        if abs(float(b.normal @ (middle - b.foot))) > cfg.merge_offset:
+            return False
+        chi2 = ekf.line_agreement(a.s, a.p, a.anchor, b.s, b.p, b.anchor, cfg.line_floor)
+        if chi2 > ekf.CHI2_2DOF_999 or self._crossed(a, b, ends):
+            return False
+        if gap_end - gap_start <= cfg.door_width:
+            return True
+        gap = a.extent.along(ends)
+        return max(a.extent.seen_through(gap.min(), gap.max()), _seen_through(b, ends)) < 0.3
+
+    def _crossed(self, a: Wall, b: Wall, gap: Array) -> bool:
+        """Whether a confirmed wall crosses ``a``'s line between the two ends of ``gap``."""
+        across = gap[1] - gap[0]
+        length2 = max(float(across @ across), 1e-12)
+        for other in (self.walls[i] for i in sorted(self.index.near(gap))):
+            if other is a or other is b or not other.confirmed(self.config):
+                continue
+            if abs(float(other.normal @ a.normal)) > math.cos(CROSSING_ANGLE):
+                continue
+            for p, q in other.segments():
+                side_p, side_q = float(a.normal @ (p - a.foot)), float(a.normal @ (q - a.foot))
+                if min(side_p, side_q) > -CROSSING_REACH or max(side_p, side_q) < CROSSING_REACH:
+                    continue  # ends at the line (a T) or stays on one side
+                at = p + (q - p) * (side_p / (side_p - side_q))  # where it meets the line
+                if 0.0 < float((at - gap[0]) @ across) / length2 < 1.0:
+                    return True
+        return False
 
     def _same_wall(self, a: Wall, b: Wall) -> bool:
         """Lines within ``merge_angle`` and ``merge_offset`` where the extents overlap."""
@@ -557,7 +638,9 @@ class WallMap:
         """The segments of walls ``ids``, with their ends joined at corners.
 
         An end of a served wall that meets a served neighbour's end at a corner moves onto the
-        corner. ``served`` caches :meth:`served` and comes back filled for ``ids``.
+        corner (an L); so does one that meets a neighbour going on through the crossing (a T),
+        which keeps its segments. ``served`` caches :meth:`served` and comes back filled for
+        ``ids``.
         """
         raw: dict[int, tuple[Array, list[float]]] = {}
 
@@ -598,7 +681,12 @@ class WallMap:
                 # The shallower the corner, the farther past it the inlier band reaches.
                 far = min(max_reach, max(reach, band / abs(det)))
                 end_a = _end_near(a_ends, cx, cy, far)
-                if end_a is not None and _end_near(segments(b)[1], cx, cy, far) is not None:
+                if end_a is None:
+                    continue
+                b_ends = segments(b)[1]
+                # An L (both end at the crossing) or a T (b goes on through it): a's end goes
+                # there. The wall that goes on through a T is not cut (its end is not near).
+                if _end_near(b_ends, cx, cy, far) is not None or _passes(b_ends, cx, cy, far):
                     mine[(0, -1)[end_a], end_a] = (cx, cy)
         return out
 
@@ -635,3 +723,9 @@ class WallMap:
         self.changed.clear()
         self.removed.clear()
         return {"frames": self.frames, "stamp": self.stamp, "walls": walls, "removed": removed}
+
+
+def _seen_through(wall: Wall, ends: Array) -> float:
+    """Share of a stretch of ``wall``'s line (two map points) that rays crossed repeatedly."""
+    gap = wall.extent.along(ends)
+    return wall.extent.seen_through(gap.min(), gap.max())
