@@ -7,7 +7,7 @@ default to 500-502, away from the ones the detector and mapper were tuned on (1-
 the ones the tests use. Results are in docs/accuracy.md.
 
     .venv/bin/python benchmarks/accuracy.py [--frames N] [--scenes a,b] [--seeds 500,501]
-        [--poses tf,odom] [--detector-noise-k K] [--jobs 2] [--details] [--quick]
+        [--poses tf,odom,slam] [--detector-noise-k K] [--jobs 2] [--details] [--quick]
 """
 
 from __future__ import annotations
@@ -35,12 +35,14 @@ from wallmap.common.scene import (
 )
 from wallmap.offline import map_bag, walls
 from wallmap.services.detector.detector import DetectorConfig
+from wallmap.services.mapper.pose_correction import SlamConfig
 
-POSE_SOURCES = ("tf", "odom")
+POSE_SOURCES = ("tf", "odom", "slam")
 HEADER = """\
 One row per scene kind and pose source, summed or taken the median over the seeds.
   poses      tf: true poses (map -> odom -> base_link); odom: drifting odometry alone
-             (about 2 % and 1 deg per metre), scored in the map frame all the same
+             (about 2 % and 1 deg per metre), scored in the map frame all the same;
+             slam: the same odometry, corrected by the walls (wallmap mapper --slam)
   precision  mapped walls matching a true wall / mapped walls (pooled over the seeds)
   recall     true non-glass walls seen in >= 3 frames and matched / such walls (pooled)
   dups       true walls matched by two or more mapped walls (summed)
@@ -102,7 +104,9 @@ def run_scene(
         results = []
         for pose_source in poses:
             start = time.perf_counter()
-            wall_map = map_bag(info.path, detector=detector, pose_source=pose_source)
+            slam = SlamConfig() if pose_source == "slam" else None
+            source = "odom" if pose_source == "slam" else pose_source
+            wall_map = map_bag(info.path, detector=detector, pose_source=source, slam=slam)
             seconds = time.perf_counter() - start
             score = evaluate_map(walls(wall_map), info.plan, info.seen_counts)
             details = _describe(score, info.plan, info.seen_counts)

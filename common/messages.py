@@ -47,6 +47,14 @@ def _int(m: dict[str, Any], key: str) -> int:
     return value
 
 
+def _count(m: dict[str, Any], key: str) -> int:
+    value = _int(m, key)
+    if value < 0:
+        msg = f"field {key!r} must not be negative"
+        raise MessageError(msg)
+    return value
+
+
 def _str(m: dict[str, Any], key: str, default: str | None = None) -> str:
     value = m.get(key, default)
     if not isinstance(value, str):
@@ -206,8 +214,8 @@ class Frame:
     ``run`` names the player run and ``seq`` numbers its frames from 0, so the mapper can
     acknowledge them and a player in ``--fast`` mode can wait. ``sensor`` says whose noise the
     points carry: a depth camera's (``depth``, even when the player sent only the chosen row) or
-    a 2-D scanner's (``scan``). ``resends`` says the player sends lost frames again (``--fast``),
-    so the mapper waits for a missing frame rather than skip it. ``band`` (low, high) says the
+    a 2-D scanner's (``scan``). ``lossless`` says the player waits for the pipeline (``--fast``):
+    its frames are never skipped, however far behind a service is. ``band`` (low, high) says the
     points are the stack of that height band the player picked (``scan_row.pick_points``), not
     a whole cloud.
     """
@@ -219,7 +227,7 @@ class Frame:
     points: NDArray[np.float32]
     base_from_sensor: Array
     sensor: str = "depth"
-    resends: bool = False
+    lossless: bool = False
     band: tuple[float, float] | None = None
 
     def to_map(self) -> dict[str, Any]:
@@ -232,7 +240,7 @@ class Frame:
             "points": self.points,
             "base_from_sensor": self.base_from_sensor,
             "sensor": self.sensor,
-            "resends": self.resends,
+            "lossless": self.lossless,
             **({} if self.band is None else {"band": list(self.band)}),
         }
 
@@ -249,13 +257,13 @@ class Frame:
             raise MessageError(msg)
         return cls(
             run=_str(m, "run"),
-            seq=_int(m, "seq"),
+            seq=_count(m, "seq"),
             stamp=_finite(m, "stamp"),
             frame_id=_str(m, "frame_id"),
             points=points,
             base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
             sensor=_sensor(m),
-            resends=_flag(m, "resends"),
+            lossless=_flag(m, "lossless"),
             band=_band(m),
         )
 
@@ -322,7 +330,8 @@ class WallObservation:
 class Observations:
     """The detector's output for one frame, also when it found no wall.
 
-    ``resends`` is copied from the frame: the mapper waits for a missing frame only then.
+    ``lossless`` is copied from the frame. ``skipped``: the detector skipped the frame (behind in
+    real-time playback); the message stands for it, so the mapper does not wait for it.
     ``rays`` is what the sensor saw through, in the base frame: the sensor's position
     ``ray_origin`` and (n, 2) points where some of its rays in the height band ended (the
     farthest return of sampled image columns). Space between them is free: a mapped wall that
@@ -335,10 +344,11 @@ class Observations:
     stamp: float
     frame: str
     walls: list[WallObservation] = field(default_factory=list)
-    resends: bool = False
+    lossless: bool = False
     ray_origin: Array | None = None
     rays: Array | None = None
     sensor: str = "depth"
+    skipped: bool = False
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
@@ -348,8 +358,9 @@ class Observations:
             "stamp": self.stamp,
             "frame": self.frame,
             "walls": [w.to_map() for w in self.walls],
-            "resends": self.resends,
+            "lossless": self.lossless,
             "sensor": self.sensor,
+            "skipped": self.skipped,
         }
         if self.rays is not None and self.ray_origin is not None:
             m["free"] = {"origin": self.ray_origin.tolist(), "ends": self.rays.tolist()}
@@ -366,14 +377,15 @@ class Observations:
         origin, rays = _free(m)
         return cls(
             run=_str(m, "run"),
-            seq=_int(m, "seq"),
+            seq=_count(m, "seq"),
             stamp=_finite(m, "stamp"),
             frame=_str(m, "frame", "base_link"),
             walls=[WallObservation.from_map(w) for w in walls],
-            resends=_flag(m, "resends"),
+            lossless=_flag(m, "lossless"),
             ray_origin=origin,
             rays=rays,
             sensor=_sensor(m),
+            skipped=_flag(m, "skipped"),
         )
 
 

@@ -249,6 +249,16 @@ class Keys:
         return f"{self.prefix}/pose"
 
     @property
+    def pose_corrected(self) -> str:
+        """The mapper's corrected pose under --slam (a contract pose)."""
+        return f"{self.prefix}/pose/corrected"
+
+    @property
+    def pose_correction(self) -> str:
+        """The map -> odom correction under --slam (a contract pose, child ``odom``)."""
+        return f"{self.prefix}/pose/correction"
+
+    @property
     def observations(self) -> str:
         """Wall observations, detector -> mapper."""
         return f"{self.prefix}/walls/observations"
@@ -257,6 +267,16 @@ class Keys:
     def detector_rows(self) -> str:
         """Queryable of the detector: the row selection, so players send only that row."""
         return f"{self.prefix}/detector/rows"
+
+    @property
+    def markers(self) -> str:
+        """ROS 2 out: visualization_msgs/msg/MarkerArray (CDR), as zenoh-bridge-ros2dds names it."""
+        return f"{self.prefix}/markers"
+
+    @property
+    def trajectory(self) -> str:
+        """ROS 2 out: nav_msgs/msg/Path (CDR) of the poses the mapper used."""
+        return f"{self.prefix}/trajectory"
 
     @property
     def map_walls(self) -> str:

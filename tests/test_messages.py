@@ -90,6 +90,7 @@ def test_bad_frames_are_refused_with_their_reason():
         "shape": {**good, "points": np.zeros((2, 2, 2), np.float32)},
         "base_from_sensor": {**good, "base_from_sensor": np.eye(3)},
         "'seq' must be an integer": {**good, "seq": 1.5},
+        "'seq' must not be negative": {**good, "seq": -1},
     }
     for reason, m in cases.items():
         with pytest.raises(MessageError, match=reason):

@@ -1,25 +1,23 @@
 """No frame lost when a detector or the router restarts mid-bag under `--fast`.
 
-The mapper takes each run's frames once and in order and acknowledges by frame number; when
-acknowledgements stall, the player sends the frames again from the first one not acknowledged.
+The mapper takes each run's frames once and in order and acknowledges by frame number; frames
+lost on the way come back from the history (``common.history``), and the player only waits.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 
 import numpy as np
 import pytest
 import zenoh
 
-from wallmap.common.codec import MessageError, decode, encode
-from wallmap.common.messages import Frame, pack, unpack_frame
+from wallmap.common.codec import decode
+from wallmap.common.messages import Frame, pack
 from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.offline import map_bag, walls
-from wallmap.services.mapper.service import _InOrder
 
 N_FRAMES = 300
 
@@ -70,8 +68,6 @@ def _play_with_a_fault(stack, scene, fault, *, loses_frames: bool) -> tuple[dict
     assert player.proc.wait(timeout=120) == 0, player.output()
     assert f"published {N_FRAMES} frames" in player.output()
     assert f"the mapper integrated {N_FRAMES}" in player.output()
-    if loses_frames:  # else it depends on who reconnects first
-        assert "sending again from frame" in player.output(), "the fault lost frames: test it"
     return stack.query("--min-obs", "3"), answered
 
 
@@ -84,7 +80,8 @@ def reference(scene) -> dict:
 def assert_same_walls(reply: dict, reference: dict) -> None:
     """No wall lost or added, the same ids; the lines agree within RANSAC's sampling.
 
-    The detector samples afresh for frames sent again, so lines differ a little.
+    Frames detected again come out the same (RANSAC is seeded by the frame number); the
+    tolerances cover the map's own order effects.
     """
     assert reply["frames"] == reference["frames"]
     mine = {w["id"]: w for w in reply["walls"]}
@@ -130,28 +127,6 @@ def test_router_restarted_mid_bag_loses_no_frame(stack, scene, reference) -> Non
     assert_same_walls(reply, reference)
 
 
-@pytest.mark.parametrize("resends", [True, False])
-def test_each_run_is_taken_once_in_order_and_gaps_wait_only_for_a_resending_player(resends):
-    order = _InOrder()
-    assert order.take("a", 5, resends=resends) is None  # first seen mid-way: starts there
-    gap = order.take("a", 7, resends=resends)
-    assert gap == ("out_of_order" if resends else None)  # real time skips the lost frame 6
-    if resends:
-        assert order.take("a", 6, resends=True) is None
-        assert order.take("a", 7, resends=True) is None
-    assert order.take("a", 6, resends=resends) == "resent"
-
-
-def test_the_resends_flag_is_optional_and_must_be_a_boolean():
-    frame = Frame("r", 0, 1.0, "cam", np.zeros((1, 2, 3), np.float32), np.eye(4))
-    message = frame.to_map()
-    del message["resends"]
-    assert unpack_frame(encode(message)).resends is False  # older players
-    with pytest.raises(MessageError, match="'resends' must be true or false"):
-        unpack_frame(encode({**frame.to_map(), "resends": 1}))
-    assert unpack_frame(pack(replace(frame, resends=True))).resends is True
-
-
 @pytest.mark.e2e
 def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_path) -> None:
     """SIGKILL the mapper mid-bag, restart it on its state file: every frame, the same walls."""
@@ -181,7 +156,8 @@ def test_mapper_killed_mid_bag_resumes_from_its_state_file(stack, scene, tmp_pat
 
 @pytest.mark.e2e
 def test_a_slow_detector_drops_the_oldest_real_time_frames_and_never_fast_ones(stack) -> None:
-    stack.start("detector", "detector", *stack.zenoh_args)
+    # A 2 s window holds 120 frames: a burst of 400 is more than twice that.
+    stack.start("detector", "detector", "--history", "2", *stack.zenoh_args)
     keys = Keys(stack.prefix)
     rng = np.random.default_rng(1)
     wall = np.column_stack([np.full(400, 2.0), np.linspace(-2, 2, 400), np.zeros(400)])

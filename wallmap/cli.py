@@ -17,6 +17,7 @@ import zenoh
 
 from wallmap import __version__
 from wallmap.arg_types import finite, intrinsics, non_negative, positive
+from wallmap.common.history import History
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scan_row import RowSelection
@@ -41,6 +42,7 @@ from wallmap.plot import write_picture
 from wallmap.services.detector import service as detector_service
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.mapper import service as mapper_service
+from wallmap.services.mapper.pose_correction import SlamConfig
 from wallmap.services.mapper.pose_input import FORMATS as POSE_FORMATS
 from wallmap.services.mapper.pose_input import make_pose_input
 from wallmap.services.mapper.state_file import StateError
@@ -108,7 +110,10 @@ def _cmd_detector(args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     detector_service.run(
-        settings_from_args(args, wait_for_router=math.inf), config, stop_on_signals()
+        settings_from_args(args, wait_for_router=math.inf),
+        config,
+        stop_on_signals(),
+        History(seconds=args.history),
     )
     return 0
 
@@ -121,6 +126,10 @@ def _cmd_mapper(args: argparse.Namespace) -> int:
         pose_format=args.pose_format,
         pose_frames=args.pose_frames,
         pose_wait=args.pose_wait,
+        gap_wait=args.gap_wait,
+        history=History(seconds=args.history),
+        slam=SlamConfig() if args.slam else None,
+        ros2_out=args.ros2_out,
     )
     mapper_service.run(
         settings_from_args(args, wait_for_router=math.inf), mapper, stop_on_signals()
@@ -131,7 +140,10 @@ def _cmd_mapper(args: argparse.Namespace) -> int:
 def _cmd_odometry(args: argparse.Namespace) -> int:
     config = OdometryConfig(initial_pose=args.initial_pose, use_walls=not args.no_walls)
     odometry_service.run(
-        settings_from_args(args, wait_for_router=math.inf), config, stop_on_signals()
+        settings_from_args(args, wait_for_router=math.inf),
+        config,
+        stop_on_signals(),
+        history=History(seconds=args.history),
     )
     return 0
 
@@ -153,6 +165,7 @@ def _cmd_player(args: argparse.Namespace) -> int:
         duration=args.duration,
         loop=args.loop,
         paused=args.paused,
+        history=History(seconds=args.history),
     )
     settings = settings_from_args(args, wait_for_router=args.wait_timeout)
     result = player_service.run(settings, player, stop_on_signals())
@@ -203,6 +216,8 @@ def _cmd_up(args: argparse.Namespace) -> int:
         min_obs=args.min_obs,
         truth=args.truth,
         odometry=args.odometry,
+        history=args.history,
+        slam=args.slam,
     )
     if args.odometry and args.pose_source not in (None, "tf", "none"):
         msg = f"--odometry estimates the poses itself; drop --pose-source {args.pose_source}"
@@ -292,6 +307,26 @@ def _add_bag_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_slam_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--slam",
+        action="store_true",
+        help="take the poses as odometry and correct them with the walls; the corrected pose "
+        "goes out on {prefix}/pose/corrected, map -> odom on {prefix}/pose/correction",
+    )
+
+
+def _add_history_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--history",
+        type=positive,
+        default=History.seconds,
+        metavar="SECONDS",
+        help="how much of the live streams is kept for a service that restarts or a link that "
+        f"comes back (default {History.seconds:g} s; at most 512 MB a stream)",
+    )
+
+
 def _add_band_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--band",
@@ -333,6 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_router)
 
     p = sub.add_parser("player", help="play a bag: sensor frames and poses")
+    _add_history_argument(p)
     _add_bag_arguments(p)
     p.add_argument(
         "--wait-timeout", type=positive, default=30.0, help="wait for router and services (s)"
@@ -359,6 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_player)
 
     p = sub.add_parser("detector", help="sensor frames -> wall observations")
+    _add_history_argument(p)
     p.add_argument(
         "--rows", choices=("band", "row"), default="band", help="row choice (default band)"
     )
@@ -374,6 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_detector)
 
     p = sub.add_parser("mapper", help="the EKF wall map, served as a queryable")
+    _add_history_argument(p)
     p.add_argument(
         "--state", type=Path, metavar="FILE", help="keep the map in FILE across restarts"
     )
@@ -395,10 +433,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="the pose wanted from ros2:tf2_msgs/msg/TFMessage (default map>base_link)",
     )
     p.add_argument("--pose-wait", type=positive, default=5.0, help="max wait for a pose (s)")
+    _add_slam_argument(p)
+    p.add_argument(
+        "--ros2-out",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="publish the map as ROS 2 messages on {prefix}/markers (MarkerArray) and "
+        "{prefix}/trajectory (Path), CDR, for RViz through zenoh-bridge-ros2dds (default on)",
+    )
+    p.add_argument(
+        "--gap-wait",
+        type=positive,
+        default=mapper_service.MapperSettings.gap_wait,
+        metavar="SECONDS",
+        help="how long a frame waits for the earlier ones of its run to come back from history "
+        f"before they are given up as lost (default {mapper_service.MapperSettings.gap_wait:g} s)",
+    )
     add_zenoh_arguments(p)
     p.set_defaults(func=_cmd_mapper)
 
     p = sub.add_parser("odometry", help="poses from the sensor frames (scan matching)")
+    _add_history_argument(p)
     p.add_argument(
         "--initial-pose",
         type=_pose,
@@ -431,6 +486,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_status)
 
     p = sub.add_parser("up", help="router + detector + mapper (+ odometry) + player, one machine")
+    _add_history_argument(p)
+    _add_slam_argument(p)
     _add_bag_arguments(p)
     _add_band_argument(p)
     p.add_argument("--state", type=Path, metavar="FILE", help="the mapper's state file")

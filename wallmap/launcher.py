@@ -20,6 +20,7 @@ from importlib import resources
 from pathlib import Path
 
 from wallmap.common.evaluation import evaluate_map
+from wallmap.common.history import History
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -46,6 +47,8 @@ class UpOptions:
     min_obs: int = 3
     truth: Path | None = None
     odometry: bool = False  # poses from the scans (wallmap odometry), for bags without poses
+    history: float = History.seconds  # s of the live streams kept for a service that restarts
+    slam: bool = False  # the mapper corrects the poses with the walls (mapper --slam)
 
 
 def source_flags(source: SourceOptions) -> list[str]:
@@ -136,10 +139,12 @@ def up(settings: ZenohSettings, options: UpOptions) -> int:
     """Run router, mapper, detector and player; print the map when the bag is done."""
     endpoint = settings.connect[0]
     common = ["--connect", endpoint, "--prefix", settings.prefix]
+    common += ["--history", repr(options.history)]
     if settings.config_file:
         common += ["--zenoh-config", str(settings.config_file)]
     env = {**os.environ, "WALLMAP_LOG": os.environ.get("WALLMAP_LOG", "WARNING")}
     mapper_args = ["mapper", *common] + (["--state", str(options.state)] if options.state else [])
+    mapper_args += ["--slam"] if options.slam else []
     speed = ["--fast"] if options.fast else ["--rate", str(options.rate)]
     source = options.source
     if options.odometry:

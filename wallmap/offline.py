@@ -17,6 +17,7 @@ from wallmap.common.map_consistency import place_scan
 from wallmap.common.messages import Frame, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
+from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 from wallmap.services.player.bag_source import LASERSCAN
@@ -34,6 +35,7 @@ def map_bag(
     odometry: OdometryConfig | None = None,
     poses: list[Pose] | None = None,
     source: SourceOptions | None = None,
+    slam: SlamConfig | None = None,
 ) -> WallMap:
     """Map a whole bag; frames without a pose are skipped.
 
@@ -47,10 +49,12 @@ def map_bag(
             the walls fed back after every frame (the service gets them twice a second).
         poses: If given, every pose used is appended to it.
         source: How to read the recording (levelling, a TUM folder's camera).
+        slam: Take the poses as odometry and correct them with the walls (``mapper --slam``).
     """
     wall_detector = WallDetector(detector or DetectorConfig())
     wall_map = WallMap(mapper)
     tracker = PoseTracker(odometry) if odometry is not None else None
+    corrector = PoseCorrector(slam) if slam is not None else None
     rows = wall_detector.config.rows
     source_poses = "none" if tracker is not None else pose_source
     options = dataclasses.replace(source or SourceOptions(), pose_source=source_poses)
@@ -75,6 +79,8 @@ def map_bag(
                 band=frame.band,
             )
             observations = wall_detector.detect(message)
+            if corrector is not None:
+                pose = corrector.step(observations, pose, wall_map)
             wall_map.integrate(observations, pose)
             if poses is not None:
                 poses.append(pose)

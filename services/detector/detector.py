@@ -34,7 +34,8 @@ class DetectorConfig:
             constant with range.
         min_distance: walls whose line passes closer than this to the robot are refused (m):
             nothing real is that close, and (u, v) degenerates there.
-        seed: seed of the RANSAC sampler, so a run can be repeated exactly.
+        seed: seed of the RANSAC sampler, with each frame's number, so a run can be repeated
+            exactly, and a frame detected again (a restarted detector) comes out the same.
     """
 
     rows: RowSelection = field(default_factory=RowSelection)
@@ -72,7 +73,6 @@ class WallDetector:
 
     def __init__(self, config: DetectorConfig) -> None:
         self.config = config
-        self._rng = np.random.default_rng(config.seed)
         self.noise = {"depth": NoiseLevel(), "scan": NoiseLevel()}
 
     def detect(self, frame: Frame, report: RowReport | None = None) -> Observations:
@@ -91,7 +91,10 @@ class WallDetector:
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = replace(base, noise_scale=base.noise_scale * noise.scale)
-        lines = detect_lines(scan, params, self._rng, report)
+        # Sampled afresh for each frame from the seed and the frame's number: a detector that
+        # restarts and takes a frame again finds exactly what the first one found.
+        rng = np.random.default_rng((self.config.seed, frame.seq))
+        lines = detect_lines(scan, params, rng, report)
         noise.learn(lines)
         if report is not None:
             near = sum(1 for line in lines if line.offset < self.config.min_distance)
@@ -115,7 +118,7 @@ class WallDetector:
             stamp=frame.stamp,
             frame="base_link",
             walls=walls,
-            resends=frame.resends,
+            lossless=frame.lossless,
             ray_origin=origin,
             rays=rays,
             sensor=frame.sensor,

@@ -1,10 +1,12 @@
 """The detector service: sensor frames in over Zenoh, wall observations out.
 
-Frames arrive through a bounded FIFO channel that the service's own thread drains. Under
-``wallmap player --fast``, when the detector falls behind, the channel fills and Zenoh pushes back
-on the publisher (the observations are sent with congestion control BLOCK), so no frame is lost;
-in real-time playback it works off short bursts in order and skips to the newest frame only when
-truly behind (``frames_in_turn``).
+Frames arrive with the history window (``common.history``: a detector restarted mid-run gets the
+frames it missed, a link back recovers what was lost on it) through a channel that the
+service's own thread drains. Under ``wallmap player --fast`` the player keeps at most 16 frames
+beyond what the mapper acknowledged in flight, so a slow detector slows the player and nothing
+is lost; in real-time playback it works off bursts in order and skips to the newest frame only
+when more than twice the window behind (``frames_in_turn``), telling the mapper which frames it
+skipped. Observations are published with the history window too, for a mapper that restarts.
 """
 
 from __future__ import annotations
@@ -12,10 +14,12 @@ from __future__ import annotations
 import threading
 
 import zenoh
+from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
-from wallmap.common.messages import pack
+from wallmap.common.history import History, declare_history_publisher, subscribe_with_history
+from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
 from wallmap.common.runtime import (
     Presence,
@@ -27,11 +31,19 @@ from wallmap.common.runtime import (
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
-QUEUE_DEPTH = 8
 
+def run(
+    settings: ZenohSettings,
+    config: DetectorConfig,
+    stop: threading.Event,
+    history: History | None = None,
+) -> Stats:
+    """Run until ``stop`` is set; returns the counters.
 
-def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) -> Stats:
-    """Run until ``stop`` is set; returns the counters."""
+    ``history``: the window of frames asked for at start and recovered after a loss, and of
+    observations kept for a mapper that missed them.
+    """
+    history = history or History()
     log = setup_logging("detector")
     keep_large_buffers()  # whole clouds are megabytes each
     keys = Keys(settings.prefix)
@@ -39,32 +51,25 @@ def run(settings: ZenohSettings, config: DetectorConfig, stop: threading.Event) 
     detector = WallDetector(config)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add) as session:
-        publisher = session.declare_publisher(
-            keys.observations, congestion_control=zenoh.CongestionControl.BLOCK
-        )
+        publisher = declare_history_publisher(session, keys.observations, history.samples())
         diagnostics = session.declare_publisher(keys.detector_diagnostics)
-        subscriber = session.declare_subscriber(
-            keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
-        )
+        frames = subscribe_with_history(
+            session, keys.frames, history,
+            lambda channel: _work(channel, detector, publisher, diagnostics, stats, history),
+            lambda n: stats.note("missed", "missed", f"{n} frames lost for good "
+                                 "(past the history window)", n=n),
+        )  # fmt: skip
         rows = session.declare_queryable(keys.detector_rows)
         token = Presence(session, keys, "detector", stats)
-        workers = [
-            threading.Thread(
-                target=_work,
-                args=(subscriber.handler, detector, publisher, diagnostics, stats),
-                daemon=True,
-            ),
-            threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True),
-        ]
-        for worker in workers:
-            worker.start()
+        answers = threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True)
+        answers.start()
         log.info("ready: %s -> %s (rows: %s)", keys.frames, keys.observations, config.rows)
         stop.wait()
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
-        subscriber.undeclare()
+        frames.undeclare()
         rows.undeclare()
-        for worker in workers:
+        for worker in (frames, answers):
             worker.join(timeout=5.0)
     return stats
 
@@ -79,16 +84,23 @@ def _answer_rows(channel: zenoh.handlers.Handler[zenoh.Query], config: DetectorC
 def _work(
     channel: zenoh.handlers.Handler[zenoh.Sample],
     detector: WallDetector,
-    publisher: zenoh.Publisher,
+    publisher: AdvancedPublisher,
     diagnostics: zenoh.Publisher,
     stats: Stats,
+    history: History,
 ) -> None:
     """Detect walls in every frame until the subscriber is undeclared.
 
     Each frame's diagnostics (points, clusters, lines, what was turned down and why) go out on
     their own key; Zenoh sends nothing when nobody listens.
     """
-    for frame in frames_in_turn(channel, stats):
+
+    def skipped(frames: list[Frame]) -> None:  # the mapper need not wait for them
+        for frame in frames:
+            publisher.put(pack(Observations(frame.run, frame.seq, frame.stamp, "base_link",
+                                            lossless=frame.lossless, skipped=True)))  # fmt: skip
+
+    for frame in frames_in_turn(channel, stats, history, skipped):
         report = RowReport()
         observations = detector.detect(frame, report)
         publisher.put(pack(observations))

@@ -12,27 +12,32 @@ from __future__ import annotations
 
 import collections
 import json
+import logging
 import threading
 import time
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import zenoh
 
 from wallmap.common.codec import MessageError, encode
-from wallmap.common.messages import Observations, Progress, pack, unpack_observations
+from wallmap.common.history import History, subscribe_with_history
+from wallmap.common.messages import Observations, Pose, Progress, pack, unpack_observations
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import state_file
+from wallmap.services.mapper.in_order import InOrder
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
+from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
+from wallmap.services.mapper.ros2_out import Ros2Outlet
 from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 
-QUEUE_DEPTH = 64
-MAX_PENDING = 512
+MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
 MAX_RUNS = 16
+HOLD_POLL = 0.02  # s between looks at a held gap
 ACK_EVERY = 8  # frames between acknowledgements while busy
 UPDATE_PERIOD = 0.5  # s between map updates while busy
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
@@ -49,7 +54,13 @@ class MapperSettings:
         pose_format: ``wallmap`` or ``ros2:<type>`` (CDR from a ROS 2 system, see pose_input).
         pose_frames: ``PARENT>CHILD`` of the pose, for ``ros2:tf2_msgs/msg/TFMessage``.
         pose_wait: longest an observation waits for its pose (s, wall clock).
+        gap_wait: longest a frame waits for earlier ones of its run (s, wall clock): missing
+            frames come back from the history meanwhile, or are given up and counted as lost.
         save_every: seconds between state saves while the map changes.
+        history: the window of observations and poses asked for at start and recovered.
+        slam: take the poses as odometry and correct them with the walls (``--slam``), else
+            None: the poses are used as they come.
+        ros2_out: publish the map as ROS 2 markers and a path (``services.mapper.ros2_out``).
     """
 
     state: Path | None = None
@@ -57,7 +68,11 @@ class MapperSettings:
     pose_format: str = "wallmap"
     pose_frames: str = "map>base_link"
     pose_wait: float = 5.0
+    gap_wait: float = 10.0
     save_every: float = 2.0
+    history: History = field(default_factory=History)
+    slam: SlamConfig | None = None
+    ros2_out: bool = True
     map: MapperConfig = field(default_factory=MapperConfig)
     poses: PoseBufferConfig = field(default_factory=PoseBufferConfig)
 
@@ -66,10 +81,16 @@ class MapperCore:
     """The map, the pose buffer and per-run counters behind one lock, shared by the workers."""
 
     def __init__(
-        self, wall_map: WallMap, poses: PoseBuffer, stats: Stats, runs: Iterable[Progress] = ()
+        self,
+        wall_map: WallMap,
+        poses: PoseBuffer,
+        stats: Stats,
+        runs: Iterable[Progress] = (),
+        corrector: PoseCorrector | None = None,
     ) -> None:
         self.map = wall_map
         self.poses = poses
+        self.corrector = corrector  # --slam
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
@@ -111,8 +132,13 @@ class MapperCore:
                 for reason in (*DROP_REASONS.values(), BACKLOG)
             },
             "refused": counts.get("refused", 0),
+            "skipped": counts.get("skipped", 0),
+            "lost": counts.get("lost", 0),
+            "missed": {what: counts.get(f"missed.{what}", 0) for what in ("observations", "poses")},
         }
         with self.lock:
+            if self.corrector is not None:
+                extra["slam"] = self.corrector.summary()
             state = (self.map.version, len(self.map.merges), json.dumps(extra))
             if self._replies and next(iter(self._replies))[0] != state:
                 self._replies.clear()
@@ -135,27 +161,37 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     if wall_map.walls:
         log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
     runs = state_file.load_runs(mapper.state) if mapper.state else []
-    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs)
+    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs, _corrector(mapper))
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add) as session:
         progress = session.declare_publisher(keys.progress)
         updates = session.declare_publisher(keys.map_updates)
-        pose_sub = session.declare_subscriber(pose_key, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
-        obs_sub = session.declare_subscriber(
-            keys.observations, zenoh.handlers.FifoChannel(QUEUE_DEPTH)
-        )
+        corrected = _CorrectedPoses(session, keys, log) if core.corrector is not None else None
+        ros2 = Ros2Outlet(session, keys) if mapper.ros2_out else None
+
+        # With history: a mapper restarted on its state file takes what it missed meanwhile.
+        def missed(what: str) -> Callable[[int], None]:
+            return lambda n: stats.note(
+                f"missed.{what}", what, f"{n} {what} lost for good (past the history window)", n=n
+            )
+
+        poses = subscribe_with_history(
+            session, pose_key, mapper.history,
+            lambda channel: _poses(channel, core, pose_input), missed("poses"),
+        )  # fmt: skip
+        observations = subscribe_with_history(
+            session, keys.observations, mapper.history,
+            lambda channel: _observations(
+                channel, core, progress, mapper.pose_wait, mapper.gap_wait, corrected
+            ),
+            missed("observations"),
+        )  # fmt: skip
         queryable = session.declare_queryable(keys.map_walls)
         workers = [
-            threading.Thread(target=_poses, args=(pose_sub.handler, core, pose_input), daemon=True),
-            threading.Thread(
-                target=_observations,
-                args=(obs_sub.handler, core, progress, mapper.pose_wait),
-                daemon=True,
-            ),
             threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
-            threading.Thread(target=_updates, args=(core, updates, stop), daemon=True),
+            threading.Thread(target=_updates, args=(core, updates, stop, ros2), daemon=True),
         ]
         for worker in workers:
             worker.start()
@@ -165,12 +201,60 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
             _save(core, mapper.state)
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
-        for entity in (pose_sub, obs_sub, queryable):
+        for entity in (poses, observations, queryable, *([ros2] if ros2 else [])):
             entity.undeclare()
-        for worker in workers:
+        for worker in (poses, observations, *workers):
             worker.join(timeout=5.0)
     _save(core, mapper.state)
     return stats
+
+
+def _corrector(mapper: MapperSettings) -> PoseCorrector | None:
+    """The pose correction of ``--slam``, from the state file when it has one."""
+    if mapper.slam is None:
+        return None
+    saved = state_file.load_slam(mapper.state) if mapper.state else None
+    if saved is None:
+        return PoseCorrector(mapper.slam)
+    try:
+        return PoseCorrector.from_json(saved, mapper.slam)
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"state file {mapper.state} has an unusable 'slam' entry ({err}); move it away"
+        raise state_file.StateError(msg) from err
+
+
+class _CorrectedPoses:
+    """``{prefix}/pose/corrected`` and ``{prefix}/pose/correction`` (map -> odom) under --slam.
+
+    Published from the observations thread, frame by frame; DROP, so a slow reader never holds
+    the map back. It also says when the pose runs on odometry alone, once per stretch.
+    """
+
+    ALONE_AFTER = 15  # frames without a wall fixing the pose before it is said
+
+    def __init__(self, session: zenoh.Session, keys: Keys, log: logging.Logger) -> None:
+        self._log = log
+        drop = zenoh.CongestionControl.DROP
+        self._pose = session.declare_publisher(keys.pose_corrected, congestion_control=drop)
+        self._correction = session.declare_publisher(keys.pose_correction, congestion_control=drop)
+        self._alone_since: int | None = None
+
+    def publish(self, corrector: PoseCorrector, pose: Pose, odom_frame: str) -> None:
+        """Say the corrected pose of a frame, and the correction that takes odometry there."""
+        self._pose.put(pack(pose))
+        if (correction := corrector.correction(pose.stamp, odom_frame)) is not None:
+            self._correction.put(pack(correction))
+        if corrector.streak == 0:
+            if self._alone_since is not None and self._alone_since >= self.ALONE_AFTER:
+                self._log.info("walls fix the pose again after %d frames", self._alone_since)
+            self._alone_since = None
+            return
+        self._alone_since = corrector.streak
+        if corrector.streak == self.ALONE_AFTER:
+            self._log.warning(
+                "running on odometry alone: no mapped wall fixed the pose for %d frames",
+                self.ALONE_AFTER,
+            )
 
 
 def _save(core: MapperCore, path: Path | None) -> None:
@@ -179,7 +263,8 @@ def _save(core: MapperCore, path: Path | None) -> None:
     with core.lock:
         if not core.dirty:
             return
-        document = state_file.to_json(core.map, core.runs.values())
+        slam = core.corrector.to_json() if core.corrector is not None else None
+        document = state_file.to_json(core.map, core.runs.values(), slam)
         core.dirty = False
     state_file.write(path, document)
 
@@ -200,47 +285,20 @@ def _poses(
         core.stats.add("poses", len(poses))
 
 
-class _InOrder:
-    """Each run's frames once and in order.
-
-    A frame the player sends again after its acknowledgements stalled (a detector or router
-    restarted and frames were lost on the way) may already have been taken, or may follow a
-    gap: the first is a duplicate, the second waits for the frames before it, which the player
-    sends again too. A player that does not send again (real-time playback) has its gaps
-    skipped. A run first seen mid-way (the mapper started late) starts where it is.
-    """
-
-    def __init__(self, runs: Iterable[Progress] = ()) -> None:
-        self._next: collections.OrderedDict[str, int] = collections.OrderedDict(
-            (r.run, r.processed) for r in runs
-        )
-
-    def take(self, run: str, seq: int, *, resends: bool) -> str | None:
-        """None to take frame ``seq`` of ``run`` now, else why not."""
-        expected = self._next.get(run, seq)
-        if seq < expected:
-            return "resent"
-        if seq > expected and resends:
-            return "out_of_order"
-        self._next[run] = seq + 1
-        self._next.move_to_end(run)
-        while len(self._next) > MAX_RUNS:
-            self._next.popitem(last=False)
-        return None
-
-
 def _observations(
     channel: zenoh.handlers.Handler[zenoh.Sample],
     core: MapperCore,
     progress: zenoh.Publisher,
     pose_wait: float,
+    gap_wait: float,
+    corrected: _CorrectedPoses | None = None,
 ) -> None:
-    """Fold observations into the map in arrival order, each once its pose is known."""
-    waiting = _Waiting(core, pose_wait)
+    """Fold observations into the map in frame order, each once its pose is known."""
+    waiting = _Waiting(core, pose_wait, gap_wait, corrected)
     unacked = 0  # frames processed since the last acknowledgement
     while True:
         try:
-            if not waiting.pending:
+            if not waiting.pending and not waiting.order.waiting():
                 _flush(waiting.acks, progress)  # idle: tell the players where we are
                 unacked = 0
                 waiting.add(channel.recv())
@@ -251,7 +309,11 @@ def _observations(
                 waiting.add(sample)
         except zenoh.ZError:
             return
-        unacked += waiting.process()
+        waiting.add(None)  # time passes: gaps held too long are given up
+        done = waiting.process()
+        if not done and not waiting.pending:
+            time.sleep(HOLD_POLL)  # a gap is held: history may fill it
+        unacked += done
         if unacked >= ACK_EVERY:
             _flush(waiting.acks, progress)
             unacked = 0
@@ -263,45 +325,67 @@ def _flush(acks: dict[str, Progress], progress: zenoh.Publisher) -> None:
     acks.clear()
 
 
-def _updates(core: MapperCore, updates: zenoh.Publisher, stop: threading.Event) -> None:
-    """Publish the walls that changed, at most every UPDATE_PERIOD seconds."""
+def _updates(
+    core: MapperCore, updates: zenoh.Publisher, stop: threading.Event, ros2: Ros2Outlet | None
+) -> None:
+    """Publish the walls that changed (and the ROS 2 markers), at most every UPDATE_PERIOD s."""
     while not stop.wait(UPDATE_PERIOD):
         with core.lock:
             if not core.map.changed and not core.map.removed:
                 continue
             changes = core.map.take_changes()
+            served = core.map.reply(MapQuery(trajectory=True)) if ros2 is not None else None
         updates.put(encode(changes))
+        if ros2 is not None and served is not None:
+            ros2.publish(served)
 
 
 class _Waiting:
-    """Observations waiting for their poses, in arrival order, and the runs' progress.
+    """Observations in frame order (``InOrder``), then waiting for their poses; runs' progress.
 
-    At most MAX_PENDING wait: when poses are that far behind, the oldest gives way (dropped and
-    counted), so the mapper never stops reading its channel.
+    At most MAX_PENDING wait for poses: when poses are that far behind, the oldest gives way
+    (dropped and counted), so the mapper never stops reading its channel.
     """
 
-    def __init__(self, core: MapperCore, pose_wait: float) -> None:
+    def __init__(
+        self,
+        core: MapperCore,
+        pose_wait: float,
+        gap_wait: float,
+        corrected: _CorrectedPoses | None = None,
+    ) -> None:
         self.core = core
+        self.corrected = corrected
         self.pose_wait = pose_wait
         self.pending: collections.deque[tuple[float, Observations]] = collections.deque()
         with core.lock:  # runs restored from the state file: say where they stand, first thing
             self.acks: dict[str, Progress] = dict(core.runs)  # the latest, not yet published
-            self.order = _InOrder(core.runs.values())
+            self.order = InOrder(core.runs.values(), gap_wait=gap_wait)
 
-    def add(self, sample: zenoh.Sample) -> None:
-        """Take a received sample: refused if malformed, skipped if resent or out of order."""
-        try:
-            obs = unpack_observations(sample.payload.to_bytes())
-        except MessageError as err:
-            self.core.stats.refuse("observations", str(err))
-            return
-        if (skipped := self.order.take(obs.run, obs.seq, resends=obs.resends)) is not None:
-            self.core.stats.add(skipped)
-            if skipped == "resent":  # its acknowledgement was lost on the way: say it again
-                with self.core.lock:
-                    if (progress := self.core.runs.get(obs.run)) is not None:
-                        self.acks[obs.run] = progress
-            return
+    def add(self, sample: zenoh.Sample | None) -> None:
+        """Take a received sample (None: none, time passed): in frame order, once each."""
+        obs = None
+        if sample is not None:
+            try:
+                obs = unpack_observations(sample.payload.to_bytes())
+            except MessageError as err:
+                self.core.stats.refuse("observations", str(err))
+                return
+        taken = self.order.take(obs, time.monotonic())
+        for again in taken.repeated:  # its acknowledgement was lost on the way: say it again
+            self.core.stats.add("repeated")
+            with self.core.lock:
+                if (progress := self.core.runs.get(again.run)) is not None:
+                    self.acks[again.run] = progress
+        if taken.lost:
+            self.core.stats.note(
+                "lost", "lost", f"gave up {taken.lost} frames that never came (past the history "
+                "window, or a service was down longer)", n=taken.lost,
+            )  # fmt: skip
+        for ready in taken.ready:
+            self._queue(ready)
+
+    def _queue(self, obs: Observations) -> None:
         if len(self.pending) >= MAX_PENDING:
             _, oldest = self.pending.popleft()
             self._done(oldest, integrated=False)
@@ -319,6 +403,11 @@ class _Waiting:
         """Integrate or drop the oldest observation; False when it must wait longer."""
         core = self.core
         arrived, obs = self.pending[0]
+        if obs.skipped:  # the detector skipped it (behind in real time) and said so
+            self.pending.popleft()
+            self._done(obs, integrated=False)
+            core.stats.add("skipped")
+            return True
         with core.lock:
             pose = core.poses.lookup(obs.stamp)
             if pose is Lookup.WAIT and time.monotonic() - arrived < self.pose_wait:
@@ -327,6 +416,10 @@ class _Waiting:
             self.pending.popleft()
             integrated = not isinstance(pose, Lookup)
             if integrated:
+                if core.corrector is not None and self.corrected is not None:
+                    odom_frame = pose.frame
+                    pose = core.corrector.step(obs, pose, core.map)
+                    self.corrected.publish(core.corrector, pose, odom_frame)
                 core.map.integrate(obs, pose)
                 core.dirty = True
             self._done(obs, integrated=integrated)

@@ -27,13 +27,17 @@ class StateError(RuntimeError):
     """The state file cannot be used; the message says why, in one line."""
 
 
-def to_json(wall_map: WallMap, runs: Iterable[Progress] = ()) -> dict[str, Any]:
+def to_json(
+    wall_map: WallMap, runs: Iterable[Progress] = (), slam: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Everything needed to carry on where the map stopped.
 
     ``runs`` are the players' runs as far as this map has taken them: a mapper restarted on the
-    file acknowledges them from there, and the players send it the rest again.
+    file acknowledges them from there, and the players send it the rest again. ``slam``: the
+    pose correction's state (``PoseCorrector.to_json``) under ``--slam``.
     """
     return {
+        "slam": slam,
         "v": STATE_VERSION,
         "runs": [[r.run, r.processed, r.integrated, r.dropped] for r in runs],
         "next_id": wall_map.next_id,
@@ -124,6 +128,21 @@ def load_runs(path: Path) -> list[Progress]:
     except (OSError, ValueError, TypeError, AttributeError) as err:
         msg = f"state file {path} has unusable runs ({type(err).__name__}: {err}); move it away"
         raise StateError(msg) from err
+
+
+def load_slam(path: Path) -> dict[str, Any] | None:
+    """The pose correction a state file records (None: none, or no file yet)."""
+    if not path.exists():
+        return None
+    try:
+        slam = json.loads(path.read_text(encoding="utf-8")).get("slam")
+    except (OSError, ValueError, AttributeError) as err:
+        msg = f"state file {path} is unusable ({type(err).__name__}: {err}); move it away"
+        raise StateError(msg) from err
+    if slam is not None and not isinstance(slam, dict):
+        msg = f"state file {path} has an unusable 'slam' entry; move it away"
+        raise StateError(msg)
+    return slam
 
 
 def load(path: Path, config: MapperConfig) -> WallMap:

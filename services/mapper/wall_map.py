@@ -176,6 +176,12 @@ class MapQuery:
         return cls(min_obs, flags["tentative"], bbox, since, flags["trajectory"])
 
 
+def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
+    """The observed segment's two ends in the map frame."""
+    rot = wall_model.rotation(pose[2])
+    return np.array([pose[:2] + rot @ obs.p0, pose[:2] + rot @ obs.p1])
+
+
 def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     """Whether pose ``b`` is a new viewpoint after ``a``."""
     (ax, ay, ayaw), (bx, by, byaw) = a.tolist(), b.tolist()
@@ -386,22 +392,13 @@ class WallMap:
     def _integrate_one(
         self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float, *, depth: bool
     ) -> int:
-        rot = wall_model.rotation(pose[2])
-        seg = np.array([pose[:2] + rot @ obs.p0, pose[:2] + rot @ obs.p1])
-        best: tuple[float, Wall, ekf.Innovation] | None = None
-        for wall in self._near(seg):
-            innov = ekf.innovation(
-                wall.s, wall.p, wall.anchor, obs.closest, obs.cov, pose, pose_cov
-            )
-            if innov.mahalanobis2 <= self.config.gate and (
-                best is None or innov.log_likelihood > best[0]
-            ):
-                best = (innov.log_likelihood, wall, innov)
+        seg = _segment_in_map(obs, pose)
+        best = self.match(obs, pose, pose_cov)
         if best is None:
             wall_id = self._new_wall(obs, pose, pose_cov, seg, stamp)
             self.walls[wall_id].depth_obs = int(depth)
             return wall_id
-        _, wall, innov = best
+        wall, innov = best
         wall.depth_obs += int(depth)
         wall.set_state(*ekf.update(wall.s, wall.p, innov))
         wall.extend(seg)
@@ -415,6 +412,27 @@ class WallMap:
             wall.last_view = pose.copy()
         self.changed.add(wall.id)
         return self._merge_duplicates(wall, stamp).id
+
+    def match(
+        self, obs: WallObservation, pose: Array, pose_cov: Array, min_obs: int = 0
+    ) -> tuple[Wall, ekf.Innovation] | None:
+        """The most likely wall for ``obs`` seen from ``pose`` within the gate (None: no wall).
+
+        Maximum likelihood over the walls near the observed segment, on the innovation
+        covariance (wall, observation and pose). ``min_obs``: only walls seen that often.
+        """
+        best: tuple[float, Wall, ekf.Innovation] | None = None
+        for wall in self._near(_segment_in_map(obs, pose)):
+            if wall.n_obs < min_obs:
+                continue
+            innov = ekf.innovation(
+                wall.s, wall.p, wall.anchor, obs.closest, obs.cov, pose, pose_cov
+            )
+            if innov.mahalanobis2 <= self.config.gate and (
+                best is None or innov.log_likelihood > best[0]
+            ):
+                best = (innov.log_likelihood, wall, innov)
+        return None if best is None else best[1:]
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""

@@ -14,8 +14,10 @@ import threading
 
 import numpy as np
 import zenoh
+from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.codec import MessageError
+from wallmap.common.history import History, declare_history_publisher
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, received_frames, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
@@ -31,6 +33,7 @@ def run(
     config: OdometryConfig,
     stop: threading.Event,
     rows: RowSelection | None = None,
+    history: History | None = None,
 ) -> Stats:
     """Run until ``stop`` is set; returns the counters.
 
@@ -39,6 +42,7 @@ def run(
         config: The tracker's tuning.
         stop: Set to stop.
         rows: How a depth frame becomes a scan row (the detector's choice by default).
+        history: The window of poses kept for a mapper that missed them.
     """
     log = setup_logging("odometry")
     keys = Keys(settings.prefix)
@@ -47,9 +51,9 @@ def run(
     rows = rows or RowSelection()
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add) as session:
-        publisher = session.declare_publisher(
-            keys.pose, congestion_control=zenoh.CongestionControl.BLOCK
-        )
+        # Poses with history, for a mapper that restarts; frames without: scan matching goes
+        # in order, and a restarted odometry starts afresh.
+        publisher = declare_history_publisher(session, keys.pose, (history or History()).samples())
         frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
         # Map updates come at most twice a second; a callback queues them for the worker, which
         # takes them before each frame (a channel read only then could fill and stall the session).
@@ -109,7 +113,7 @@ def _work(
     updates: queue.SimpleQueue[bytes] | None,
     tracker: PoseTracker,
     rows: RowSelection,
-    publisher: zenoh.Publisher,
+    publisher: AdvancedPublisher,
     stats: Stats,
 ) -> None:
     """A pose for every frame, in arrival order, until the subscriber is undeclared."""

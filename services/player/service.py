@@ -2,15 +2,16 @@
 
 At ``--rate X`` it keeps the bag's timing, scaled; it can be paused, stepped, sought and sped up
 through ``{prefix}/player/control`` or keys on a terminal, and says where it is on
-``{prefix}/player/progress``. With ``--fast`` it publishes as fast as the
-pipeline takes it and loses nothing: it keeps at most ``window`` frames in flight, counting the
-frames the mapper acknowledges for this run on the progress key. Before the first frame it waits
-for the services it feeds (their liveliness tokens), so no frame goes out to nobody.
+``{prefix}/player/progress``. Frames and poses are published with a history window
+(``common.history``): a service that restarts, or a link that comes back, gets what it missed.
+With ``--fast`` it publishes as fast as the pipeline takes it: it keeps at most ``window`` frames
+in flight, counting the frames the mapper acknowledges for this run on the progress key. Before
+the first frame it waits for the services it feeds (their liveliness tokens), so no frame goes
+out to nobody.
 """
 
 from __future__ import annotations
 
-import collections
 import sys
 import threading
 import time
@@ -20,9 +21,11 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode, encode
+from wallmap.common.history import MAX_RATE, History, declare_history_publisher
 from wallmap.common.messages import Frame, Pose, pack, unpack_progress
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
@@ -36,9 +39,6 @@ from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
 STOP_POLL = 0.05  # s between checks of the stop event while waiting for acknowledgements
 PROGRESS_PERIOD = 0.2  # s between progress messages
-RESEND_AFTER = 2.0  # s without an acknowledgement before frames are sent again (--fast)
-RESEND_MEMORY = 1024  # frames whose bag times are kept for sending again
-SEEK_SLACK = 1e-6  # s before a frame's bag time, so rounding cannot skip it
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,7 @@ class PlayerSettings:
         duration: play this many seconds of the bag (None: to the end).
         loop: start over at the end, until stopped.
         paused: start paused (step or resume through the controls).
+        history: the window of frames and poses kept for services that missed them.
     """
 
     bag: Path
@@ -74,6 +75,7 @@ class PlayerSettings:
     duration: float | None = None
     loop: bool = False
     paused: bool = False
+    history: History = field(default_factory=History)
 
 
 @dataclass(frozen=True)
@@ -144,7 +146,7 @@ class _Acks:
         self.integrated = 0
         self.epoch: str | None = None  # the mapper process acknowledging
         self._changed = threading.Condition()
-        self.last_change = self.last_resend = time.monotonic()
+        self.last_change = time.monotonic()
 
     def on_sample(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback: take one acknowledgement (others' runs and malformed ones ignored)."""
@@ -163,42 +165,24 @@ class _Acks:
                 self.last_change = time.monotonic()
                 self._changed.notify_all()
 
-    def wait_until(
-        self,
-        processed: int,
-        stall_timeout: float,
-        stop: threading.Event,
-        resend_after: float | None = None,
-    ) -> None:
+    def wait_until(self, processed: int, stall_timeout: float, stop: threading.Event) -> None:
         """Wait for ``processed`` frames to be acknowledged.
 
+        Frames lost on the way (a detector or the router restarting) come back from the
+        history (``common.history``): the player only waits.
+
         Raises:
-            Resend: no acknowledgement for ``resend_after`` s: frames were lost on the way.
-            PlayerError: none for ``stall_timeout`` s.
+            PlayerError: no acknowledgement for ``stall_timeout`` s.
         """
         with self._changed:
             while self.processed < processed and not stop.is_set():
-                now = time.monotonic()
-                if now - self.last_change > stall_timeout:
+                if time.monotonic() - self.last_change > stall_timeout:
                     msg = (
                         f"the mapper acknowledged no frame for {stall_timeout:.0f} s "
                         f"({self.processed} of {processed} done); is it running?"
                     )
                     raise PlayerError(msg)
-                if resend_after is not None and now - max(self.last_change, self.last_resend) > (
-                    resend_after
-                ):
-                    self.last_resend = now
-                    raise Resend(self.processed)
                 self._changed.wait(STOP_POLL)
-
-
-class Resend(Exception):  # noqa: N818 (a signal to go back, not an error)
-    """Frames from ``seq`` on must be sent again."""
-
-    def __init__(self, seq: int) -> None:
-        super().__init__(seq)
-        self.seq = seq
 
 
 class _ProgressLine:
@@ -256,18 +240,25 @@ def _control(
 
 
 class _Outlet:
-    """Where the frames go: the publishers, what was sent, and the progress messages."""
+    """Where the frames go: the publishers with their history, and the progress messages.
+
+    Frames and poses keep the history window in their caches (``common.history``), so that a
+    detector or mapper that restarts, or a link that comes back, gets what it missed. The
+    frames' cache is sized on the first frame, by its bytes.
+    """
 
     def __init__(
         self, session: zenoh.Session, keys: Keys, run_id: str, sensor: str, playback: Playback,
-        bag: FrameSource,
+        bag: FrameSource, history: History, speed: float,
     ) -> None:  # fmt: skip
-        block = zenoh.CongestionControl.BLOCK
-        self._frames = session.declare_publisher(keys.frames, congestion_control=block)
-        self._poses = session.declare_publisher(keys.pose, congestion_control=block)
+        rate = bag.frame_count / bag.duration if bag.duration > 0 else MAX_RATE
+        self._rate = min(rate * (1.0 if playback.fast else speed), MAX_RATE * 8)
+        self._session, self._keys, self._history = session, keys, history
+        self._frames: AdvancedPublisher | None = None
+        self._poses = declare_history_publisher(session, keys.pose, history.samples(self._rate))
         self._progress = session.declare_publisher(keys.player_progress)
         self._run, self._sensor, self._playback = run_id, sensor, playback
-        self.resends = playback.fast  # only --fast waits for acknowledgements, and sends again
+        self.lossless = playback.fast  # only --fast waits for the pipeline
         self.published = self.poses = 0
         self.bar = _ProgressLine(bag.frame_count)
         self.state: dict[str, Any] = {
@@ -275,28 +266,22 @@ class _Outlet:
             "duration": bag.duration, "bag": str(bag.path),
         }  # fmt: skip
         self._last_progress = 0.0
-        self._sent: collections.deque[tuple[int, float]] = collections.deque(maxlen=RESEND_MEMORY)
-
-    def rewind(self, seq: int) -> float:
-        """Send again from frame ``seq`` (numbers reused); returns its bag time to seek to."""
-        times = dict(self._sent)
-        if seq not in times:
-            msg = f"frame {seq} to send again is no longer known (sent up to {self.published})"
-            raise PlayerError(msg)
-        self.published = seq
-        return times[seq]
 
     def send(self, frame: SensorFrame, pose: Pose | None) -> None:
         """Publish one frame (and its pose), and say so at most every PROGRESS_PERIOD."""
         if pose is not None:
             self._poses.put(pack(pose))
             self.poses += 1
-        message = Frame(
-            self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-            frame.T_base_sensor, self._sensor, self.resends, frame.band,
+        message = pack(
+            Frame(
+                self._run, self.published, frame.stamp, frame.frame_id, frame.points,
+                frame.T_base_sensor, self._sensor, self.lossless, frame.band,
+            )
         )  # fmt: skip
-        self._frames.put(pack(message))
-        self._sent.append((self.published, frame.bag_time))
+        if self._frames is None:
+            samples = self._history.samples(self._rate, len(message))
+            self._frames = declare_history_publisher(self._session, self._keys.frames, samples)
+        self._frames.put(message)
         self.published += 1
         self.state["published"] = self.published
         self.bar.update(self.published)
@@ -328,9 +313,7 @@ def _play_pass(
         if turn.seek is not None:
             return turn.seek
         if player.fast:
-            acks.wait_until(
-                outlet.published - player.window + 1, player.stall_timeout, stop, RESEND_AFTER
-            )
+            acks.wait_until(outlet.published - player.window + 1, player.stall_timeout, stop)
         outlet.send(frame, pose)
     return None
 
@@ -364,7 +347,9 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )
             playback = Playback(player.rate, fast=player.fast, paused=player.paused)
-            outlet = _Outlet(session, keys, run_id, sensor, playback, bag)
+            outlet = _Outlet(
+                session, keys, run_id, sensor, playback, bag, player.history, player.rate
+            )
             control = session.declare_queryable(keys.player_control, zenoh.handlers.FifoChannel(16))
             threading.Thread(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
@@ -375,20 +360,9 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                 if interactive:
                     print(HELP, file=sys.stderr)
                 while not stop.is_set():
-                    try:
-                        seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
-                        if seek is None and not player.loop and player.fast:
-                            acks.wait_until(
-                                outlet.published, player.stall_timeout, stop, RESEND_AFTER
-                            )
-                    except Resend as resend:
-                        log.warning(
-                            "no acknowledgement for %.0f s: sending again from frame %d",
-                            RESEND_AFTER,
-                            resend.seq,
-                        )
-                        position = max(outlet.rewind(resend.seq) - SEEK_SLACK, 0.0)
-                        continue
+                    seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
+                    if seek is None and not player.loop and player.fast:
+                        acks.wait_until(outlet.published, player.stall_timeout, stop)
                     if seek is not None:
                         position = seek
                     elif player.loop and not stop.is_set():

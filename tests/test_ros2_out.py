@@ -1,0 +1,80 @@
+"""ROS 2 out: the map as MarkerArray and Path, CDR by rosbags' typestore, for RViz with no code."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from wallmap.common.scene import write_scene_bag
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.map_client import fetch_map
+from wallmap.services.mapper import ros2_out
+
+MARKERS = "visualization_msgs/msg/MarkerArray"
+PATH = "nav_msgs/msg/Path"
+
+
+def test_one_line_list_marker_per_wall_with_its_segments() -> None:
+    walls = [
+        {"id": 4, "segments": [[[0.0, 0.0], [1.0, 0.0]], [[2.0, 0.0], [3.5, 0.0]]]},
+        {"id": 9, "segments": [[[1.0, 1.0], [1.0, 2.0]]]},
+    ]
+    array = ros2_out.decode(ros2_out.markers(walls, [], 12.25, "map"), MARKERS)
+    assert [m.id for m in array.markers] == [4, 9]
+    first = array.markers[0]
+    assert first.ns == "walls"
+    assert first.type == first.LINE_LIST
+    assert first.action == first.ADD
+    assert first.header.frame_id == "map"
+    assert (first.header.stamp.sec, first.header.stamp.nanosec) == (12, 250_000_000)
+    assert [(p.x, p.y) for p in first.points] == [(0, 0), (1, 0), (2, 0), (3.5, 0)]
+
+
+def test_ids_no_longer_served_get_one_delete() -> None:
+    state = ros2_out.MarkerState()
+    seg = [[[0.0, 0.0], [1.0, 0.0]]]
+    state.payload([{"id": 1, "segments": seg}, {"id": 2, "segments": seg}], 1.0, "map")
+    merged = ros2_out.decode(state.payload([{"id": 1, "segments": seg}], 2.0, "map"), MARKERS)
+    actions = {(m.id, m.action) for m in merged.markers}
+    delete = merged.markers[0].DELETE
+    assert actions == {(1, merged.markers[0].ADD), (2, delete)}
+    again = ros2_out.decode(state.payload([{"id": 1, "segments": seg}], 3.0, "map"), MARKERS)
+    assert [m.id for m in again.markers] == [1], "a DELETE is said once"
+
+
+def test_the_path_goes_through_the_keyframes() -> None:
+    path = ros2_out.decode(ros2_out.path([[1.0, 0.0, 0.0, 0.0], [2.0, 1.0, 2.0, 1.2]], 2.0), PATH)
+    assert len(path.poses) == 2
+    last = path.poses[1].pose
+    assert (last.position.x, last.position.y) == (1.0, 2.0)
+    assert abs(2 * np.arctan2(last.orientation.z, last.orientation.w) - 1.2) < 1e-9
+
+
+@pytest.mark.e2e
+def test_a_mapped_bag_comes_out_as_markers_and_a_late_subscriber_gets_them(stack, tmp_path) -> None:
+    scene = write_scene_bag(tmp_path / "s.bag", seed=7, n_frames=200, fmt="ros1", sensor="depth16")
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    played = stack.run("player", str(scene.path), "--fast", *stack.zenoh_args)
+    assert played.returncode == 0, played.stderr
+    time.sleep(1.5)  # the markers go out with the next map update (every 0.5 s)
+    keys = Keys(stack.prefix)
+    settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
+    with open_session(settings) as session:  # comes after the map was published: late
+        reply = fetch_map(session, keys, min_obs=1, trajectory=True)
+        got = {}
+        for key, msgtype in ((keys.markers, MARKERS), (keys.trajectory, PATH)):
+            for answer in session.get(key, timeout=5.0):
+                if answer.ok is not None:
+                    got[msgtype] = ros2_out.decode(answer.ok.payload.to_bytes(), msgtype)
+    array = got[MARKERS]
+    added = {m.id: m for m in array.markers if m.action == m.ADD}
+    served = {w["id"]: w for w in reply["walls"]}
+    assert set(added) == set(served), "one ADD marker per confirmed wall, by id"
+    for wall_id, wall in served.items():
+        points = np.array([(p.x, p.y) for p in added[wall_id].points])
+        assert np.allclose(points, np.array(wall["segments"]).reshape(-1, 2), atol=1e-3)
+        assert added[wall_id].header.frame_id == "map"
+    assert len(got[PATH].poses) == len(reply["trajectory"]) > 0
