@@ -57,11 +57,19 @@ def test_a_mapped_bag_comes_out_as_markers_and_a_late_subscriber_gets_them(stack
     scene = write_scene_bag(tmp_path / "s.bag", seed=7, n_frames=200, fmt="ros1", sensor="depth16")
     stack.start("mapper", "mapper", *stack.zenoh_args)
     stack.start("detector", "detector", *stack.zenoh_args)
-    played = stack.run("player", str(scene.path), "--fast", *stack.zenoh_args)
-    assert played.returncode == 0, played.stderr
-    time.sleep(1.5)  # the markers go out with the next map update (every 0.5 s)
     keys = Keys(stack.prefix)
     settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
+    live: list[bytes] = []
+    with open_session(settings) as session:  # there from the start: gets them as they change
+        subscriber = session.declare_subscriber(
+            keys.markers, lambda sample: live.append(sample.payload.to_bytes())
+        )
+        played = stack.run("player", str(scene.path), "--fast", *stack.zenoh_args)
+        assert played.returncode == 0, played.stderr
+        time.sleep(1.5)  # the markers go out with the next map update (every 0.5 s)
+        subscriber.undeclare()
+    assert len(live) >= 2, "published as the map grew"
+    assert ros2_out.decode(live[-1], MARKERS).markers
     with open_session(settings) as session:  # comes after the map was published: late
         reply = fetch_map(session, keys, min_obs=1, trajectory=True)
         got = {}
