@@ -10,8 +10,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import numpy as np
 from rosbags.highlevel import AnyReader
@@ -25,11 +24,11 @@ from wallmap.common.ros_poses import (
     pose_from_matrix,
     pose_from_message,
 )
-from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
+from wallmap.common.scan_row import RowSelection
 from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
 from wallmap.services.player.depth import SUPPORTED_ENCODINGS, depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.frames import SensorFrame
+from wallmap.services.player.frames import ClosingSource, SensorFrame, hand_out
 from wallmap.services.player.laserscan import laserscan_to_xyz
 from wallmap.services.player.mapped_bag import mapped_messages
 from wallmap.services.player.placement import (
@@ -142,7 +141,7 @@ def _namespace(topic: str) -> str:
     return topic.lstrip("/").rpartition("/")[0]
 
 
-class BagSource:
+class BagSource(ClosingSource):
     """Sensor frames and robot poses from one bag, checked and ready when constructed.
 
     Attributes:
@@ -563,7 +562,6 @@ class BagSource:
             "stop": None if stop is None else begin + round(stop * 1e9),
         }
         messages = self._messages(connections, mapped=True, **window)
-        band = None if rows is None else rows.band or self.placement.band or DEFAULT_BAND
         for index, (_, receive_ns, msg) in enumerate(messages):
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
@@ -571,13 +569,10 @@ class BagSource:
                 pose, mount = self.placement.place(
                     self._pose_at(stamp), self._mount(frame_id, stamp)
                 )
-                stacked = None
-                if rows is None:
-                    points = self._decode(msg, slice(None))
-                else:  # a LaserScan has no height: it is one row
-                    searched = self._decode(msg, rows_to_search(rows, getattr(msg, "height", 1)))
-                    points = pick_points(searched, mount, band)
-                    stacked = band if points.shape[0] > 1 else None
+                points, stacked = hand_out(  # a LaserScan has no height: it is one row
+                    lambda rows_read, m=msg: self._decode(m, rows_read),
+                    getattr(msg, "height", 1), rows, mount, self.placement.band,
+                )  # fmt: skip
                 if points.base is not None or points.dtype != np.float32:  # not ours to change
                     points = np.array(points, dtype=np.float32)
                 points = invalid_to_nan(points)
@@ -606,16 +601,3 @@ class BagSource:
         """Close the bag; safe to call twice."""
         if self._reader.stack is not None:
             self._reader.close()
-
-    def __enter__(self) -> Self:
-        """Use as ``with BagSource(path) as source:`` to close the bag afterwards."""
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        """Close the bag."""
-        self.close()

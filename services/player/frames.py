@@ -1,8 +1,13 @@
-"""What the player hands to its publisher for each sensor message."""
+"""What the player hands to its publisher for each sensor message, and how it picks it."""
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from types import TracebackType
+from typing import Self
 
 import numpy as np
+
+from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,3 +31,44 @@ class SensorFrame:
     T_base_sensor: np.ndarray
     bag_time: float = 0.0
     band: tuple[float, float] | None = None
+
+
+def hand_out(
+    read: Callable[[slice], np.ndarray],
+    height: int,
+    rows: RowSelection | None,
+    mount: np.ndarray,
+    seen: tuple[float, float] | None,
+) -> tuple[np.ndarray, tuple[float, float] | None]:
+    """One frame's points as the player sends them, and the band they stack (or None).
+
+    ``read(rows)`` decodes those image rows of a frame ``height`` rows high. With ``rows`` None:
+    every row. Else only the rows the selection searches are read (decoding whole clouds is most
+    of a player's time) and the band's stack, or one row, is picked (``pick_points``); the band
+    is the selection's, or ``seen`` (what the sensor sees), or the default.
+    """
+    if rows is None:
+        return read(slice(None)), None
+    band = rows.band or seen or DEFAULT_BAND
+    points = pick_points(read(rows_to_search(rows, height)), mount, band)
+    return points, (band if points.shape[0] > 1 else None)
+
+
+class ClosingSource:
+    """A frame source used as ``with Source(path) as source:``, closed on the way out."""
+
+    def close(self) -> None:
+        """Release what the source holds; safe to call twice."""
+
+    def __enter__(self) -> Self:
+        """The source itself."""
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        """Close the source."""
+        self.close()

@@ -17,17 +17,15 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import Self
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from wallmap.common.messages import Pose
-from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
+from wallmap.common.scan_row import RowSelection
 from wallmap.services.player.depth import back_project
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.frames import SensorFrame
+from wallmap.services.player.frames import ClosingSource, SensorFrame, hand_out
 from wallmap.services.player.placement import (
     SURVEY_FRAMES,
     LevelMode,
@@ -98,7 +96,7 @@ def read_depth_png(path: Path, scale: float) -> np.ndarray:
     return depth
 
 
-class TumFolder:
+class TumFolder(ClosingSource):
     """Depth frames and 6-DoF camera poses from a TUM RGB-D folder, like ``BagSource``.
 
     Attributes:
@@ -192,20 +190,15 @@ class TumFolder:
             stop: Seconds from the first frame: frames before it only.
         """
         begin = self.entries[0][0]
-        band = None if rows is None else rows.band or self.placement.band or DEFAULT_BAND
         for index, (stamp, _) in enumerate(self.entries):
             offset = stamp - begin
             if (start is not None and offset < start) or (stop is not None and offset >= stop):
                 continue
             pose, mount = self.placement.place(self.pose_at(stamp), np.eye(4))
-            stacked = None
-            if rows is None:
-                points = self._points(index)
-            else:
-                points = pick_points(
-                    self._points(index, rows_to_search(rows, self.size[0])), mount, band
-                )
-                stacked = band if points.shape[0] > 1 else None
+            points, stacked = hand_out(
+                lambda rows_read, i=index: self._points(i, rows_read),
+                self.size[0], rows, mount, self.placement.band,
+            )  # fmt: skip
             frame = SensorFrame(
                 stamp, OPTICAL_FRAME, np.ascontiguousarray(points, dtype=np.float32), mount,
                 offset, stacked,
@@ -225,18 +218,3 @@ class TumFolder:
     def duration(self) -> float:
         """Time between the first and last depth image, seconds."""
         return self.entries[-1][0] - self.entries[0][0]
-
-    def close(self) -> None:
-        """Nothing stays open between frames."""
-
-    def __enter__(self) -> Self:
-        """Use as ``with TumFolder(path) as source:``, as a bag."""
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        """Nothing to close."""
