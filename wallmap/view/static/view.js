@@ -347,7 +347,8 @@
       $("render").textContent =
         `${count} walls drawn in ${ms.toFixed(1)} ms, on screen in ${frameMs.toFixed(0)} ms`;
     });
-    const key = visible.map((g) => g.rec.id).join(",");
+    // A wall that only turns confirmed (or back) must be listed again too.
+    const key = visible.map((g) => `${g.rec.id}${g.rec.tentative ? "t" : ""}`).join(",");
     if (key === drawnKey) return;
     drawnKey = key;
     $("drawn").replaceChildren(
