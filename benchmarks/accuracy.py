@@ -83,11 +83,13 @@ def run_scene(
     poses: Sequence[str],
     detector: DetectorConfig | None = None,
     bags: Path | None = None,
+    drift: tuple[float, float] = (0.02, 1.0),
 ) -> list[Result]:
     """Record one scene (or reuse it from ``bags``) and map it once per pose source."""
     kind = SCENE_KINDS[kind_name]
     with tempfile.TemporaryDirectory() as tmp:
-        path = (bags or Path(tmp)) / f"{kind_name}-{seed}-{frames}.bag"
+        tag = "" if drift == (0.02, 1.0) else f"-drift{drift[0]:g},{drift[1]:g}"
+        path = (bags or Path(tmp)) / f"{kind_name}-{seed}-{frames}{tag}.bag"
         if path.exists():
             plan, trajectory, seen = load_truth(truth_path_for(path))
             info = SceneInfo(path, truth_path_for(path), len(trajectory), plan, trajectory, seen)
@@ -100,6 +102,7 @@ def run_scene(
                 sensor="depth16",
                 camera=kind.camera,
                 plan=kind.plan(seed),
+                odometry_drift=drift,
             )
         results = []
         for pose_source in poses:
@@ -155,6 +158,11 @@ def main() -> None:
         type=float,
         help="depth noise the detector assumes (default: its own, a Kinect's 1.425e-3)",
     )
+    parser.add_argument(
+        "--odom-drift",
+        default="0.02,1.0",
+        help="how /odom drifts: position error per metre, heading error in degrees per metre",
+    )
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument("--details", action="store_true", help="list the walls that went wrong")
     parser.add_argument("--quick", action="store_true", help="smoke run: 150 frames, one seed")
@@ -169,6 +177,7 @@ def main() -> None:
     if args.quick:
         seeds, frames = seeds[:1], min(frames, 150)
     poses = args.poses.split(",")
+    drift_xy, drift_yaw = (float(v) for v in args.odom_drift.split(","))
     detector = None
     if args.detector_noise_k is not None:
         detector = DetectorConfig(ransac=RansacParams(noise_k=args.detector_noise_k))
@@ -178,7 +187,9 @@ def main() -> None:
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
-            (kind, seed): pool.submit(run_scene, kind, seed, frames, poses, detector, args.bags)
+            (kind, seed): pool.submit(
+                run_scene, kind, seed, frames, poses, detector, args.bags, (drift_xy, drift_yaw)
+            )
             for kind in kinds
             for seed in seeds
         }
@@ -187,7 +198,7 @@ def main() -> None:
     print(HEADER)
     assumed = "default" if detector is None else f"{args.detector_noise_k:g}"
     print(f"Seeds {','.join(map(str, seeds))}, up to {frames} frames per scene, ", end="")
-    print(f"detector noise_k {assumed}.\n")
+    print(f"detector noise_k {assumed}, odometry drift {args.odom_drift}.\n")
     print(
         "| scene | poses | precision | recall | dups | angle ° | offset cm | end pt cm "
         "| mapped/true | frames | s |"

@@ -2,7 +2,9 @@
 
 The paper's figures 6 and 7 show data association and the EKF update against the number of
 walls. Here a map of N walls (a grid of square rooms, 4 walls each) is built, then a robot drives
-through one room observing its walls; the median time per observation is printed per N.
+through one room observing its walls; the median time per observation is printed per N, as the
+mapper runs by default (the poses as they come) and with ``--slam`` (the poses taken as odometry,
+the pose and a window of walls estimated jointly), side by side on the same map.
 
     .venv/bin/python benchmarks/mapper_scaling.py [--sizes 10,100,1000,10000]
 """
@@ -17,6 +19,7 @@ import numpy as np
 
 from wallmap.common import wall_model
 from wallmap.common.messages import Observations, Pose, WallObservation
+from wallmap.services.mapper.pose_correction import PoseCorrector
 from wallmap.services.mapper.wall_map import WallMap
 
 ROOM = 4.0  # m
@@ -58,7 +61,12 @@ def build(n_walls: int, rng: np.random.Generator) -> WallMap:
     return wall_map
 
 
-def time_per_observation(wall_map: WallMap, rng: np.random.Generator, frames: int = 200) -> float:
+def time_per_observation(
+    wall_map: WallMap,
+    rng: np.random.Generator,
+    frames: int = 200,
+    corrector: PoseCorrector | None = None,
+) -> float:
     """Median seconds per observation while driving around one room in the middle."""
     side = round(np.sqrt(len(wall_map.walls) / 4))
     i = j = side // 2
@@ -72,7 +80,10 @@ def time_per_observation(wall_map: WallMap, rng: np.random.Generator, frames: in
         stamp += 0.1
         frame = Observations("t", step, stamp, "base_link", obs)
         start = time.perf_counter()
-        wall_map.integrate(frame, Pose(stamp, *pose))
+        if corrector is None:
+            wall_map.integrate(frame, Pose(stamp, *pose))
+        else:
+            corrector.integrate(frame, Pose(stamp, *pose), wall_map)
         times.append((time.perf_counter() - start) / len(obs))
     return statistics.median(times)
 
@@ -82,12 +93,17 @@ def main() -> None:
     parser.add_argument("--sizes", default="10,100,1000,10000")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    print(f"{'walls':>7} {'us/observation':>15} {'walls after':>12}")
+    print(f"{'walls':>7} {'us/observation':>15} {'--slam':>8} {'ratio':>6} {'walls after':>12}")
     for size in (int(s) for s in args.sizes.split(",")):
         wall_map = build(size, rng)
         n = len(wall_map.walls)
-        seconds = time_per_observation(wall_map, rng)
-        print(f"{n:>7} {seconds * 1e6:>15.1f} {len(wall_map.walls):>12}", flush=True)
+        plain = time_per_observation(wall_map, rng)
+        slam = time_per_observation(wall_map, rng, corrector=PoseCorrector())
+        print(
+            f"{n:>7} {plain * 1e6:>15.1f} {slam * 1e6:>8.1f} {slam / plain:>6.2f} "
+            f"{len(wall_map.walls):>12}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ class Innovation:
     log_likelihood: float
 
 
-def _inverse_and_det(m: Array) -> tuple[Array, float]:
+def inverse_and_det(m: Array) -> tuple[Array, float]:
     """Inverse and determinant of a 2x2 matrix, in closed form (hot path)."""
     a, b, c, d = float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1])
     det = a * d - b * c
@@ -59,7 +59,7 @@ def innovation(
     hp = wall_model.jacobian_pose(s, anchor, pose)
     cov = h @ p @ h.T + r + hp @ pose_cov @ hp.T
     residual = z - wall_model.predict(s, anchor, pose)
-    inverse, det = _inverse_and_det(cov)
+    inverse, det = inverse_and_det(cov)
     m2 = float(residual @ inverse @ residual)
     return Innovation(residual, cov, h, m2, -0.5 * (m2 + math.log(det)) - math.log(2.0 * math.pi))
 
@@ -67,7 +67,7 @@ def innovation(
 def update(s: Array, p: Array, innov: Innovation) -> tuple[Array, Array]:
     """EKF update in Joseph form, which keeps P symmetric and positive for tiny covariances."""
     h = innov.jacobian
-    gain = p @ h.T @ _inverse_and_det(innov.cov)[0]
+    gain = p @ h.T @ inverse_and_det(innov.cov)[0]
     s_new = s + gain @ innov.residual
     i_kh = _EYE2 - gain @ h
     r_eff = innov.cov - h @ p @ h.T  # the measurement and pose part of S

@@ -1,13 +1,7 @@
-"""The robot's planar pose as an EKF: odometry moves it, walls seen again pull it back.
+"""Planar poses and odometry: composition, its Jacobians, and how uncertain a step is.
 
-Wall-landmark SLAM, in the form the map already has: every wall keeps its own small EKF over its
-line (``common.ekf``), and the pose (x, y, yaw) gets one of its own. Odometry is taken as relative
-motion, ``delta = odom_prev^-1 * odom``, composed onto the estimate with noise that grows with the
-distance and the turn; each wall observation associated with a mapped wall is a measurement of the
-pose through the corrected line model (``common.wall_model``), with the wall's own uncertainty in
-its innovation covariance. Cross-correlations between the pose and the walls are not kept (a
-decoupled EKF): that keeps every update O(1) per wall, at the price of some overconfidence, which
-the association gate and the odometry noise floor absorb.
+Odometry is taken as relative motion, ``step = odom_prev^-1 * odom``, composed onto a pose
+estimate (``common.slam_ekf``) with noise that grows with the distance and the turn.
 
 All functions are pure over numpy arrays: a pose is (x, y, yaw), a covariance 3x3.
 """
@@ -21,8 +15,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
-
-_EYE3 = np.eye(3)
 
 
 def wrap(angle: float) -> float:
@@ -79,28 +71,3 @@ class OdometryNoise:
             self.turn_per_radian * abs(step[2]) + self.turn_per_metre * distance + self.floor_yaw
         )
         return np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2])
-
-
-def predict(x: Array, p: Array, step: Array, noise: OdometryNoise) -> tuple[Array, Array]:
-    """The pose after an odometry ``step``, and its grown covariance."""
-    ja, jb = compose_jacobians(x, step)
-    p_new = ja @ p @ ja.T + jb @ noise.covariance(step) @ jb.T
-    return compose(x, step), 0.5 * (p_new + p_new.T)
-
-
-def correct(
-    x: Array, p: Array, residual: Array, cov: Array, jacobian: Array
-) -> tuple[Array, Array]:
-    """EKF update of the pose with one wall observation (Joseph form).
-
-    ``residual`` and ``cov`` are the observation's innovation and its covariance S (pose, wall
-    and observation: ``common.ekf.innovation``); ``jacobian`` is d predicted / d pose, 2x3
-    (``wall_model.jacobian_pose``).
-    """
-    gain = p @ jacobian.T @ np.linalg.inv(cov)
-    x_new = x + gain @ residual
-    x_new[2] = wrap(float(x_new[2]))
-    i_kh = _EYE3 - gain @ jacobian
-    r_eff = cov - jacobian @ p @ jacobian.T  # the wall's and the observation's part of S
-    p_new = i_kh @ p @ i_kh.T + gain @ r_eff @ gain.T
-    return x_new, 0.5 * (p_new + p_new.T)

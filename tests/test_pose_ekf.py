@@ -1,4 +1,4 @@
-"""The pose EKF of --slam: composition, its Jacobians against numeric differentiation, updates."""
+"""Planar poses and odometry: composition and its Jacobians against numeric differentiation."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from wallmap.common import ekf, pose_ekf, wall_model
+from wallmap.common import pose_ekf
 
 
 def _numeric(f, x: np.ndarray, eps: float = 1e-6) -> np.ndarray:
@@ -48,28 +48,3 @@ def test_odometry_noise_grows_with_distance_and_turn() -> None:
     assert np.all(np.diag(driven) > np.diag(still))
     assert turned[2, 2] > still[2, 2]
     assert still[0, 0] > 0, "a robot standing still is never certain"
-
-
-def test_predicting_grows_the_covariance() -> None:
-    x, p = np.zeros(3), np.diag([1e-4, 1e-4, 1e-6])
-    for _ in range(10):
-        x, p = pose_ekf.predict(x, p, np.array([0.1, 0.0, 0.05]), pose_ekf.OdometryNoise())
-    assert np.linalg.det(p) > 1e-4 * 1e-4 * 1e-6
-    assert np.all(np.linalg.eigvalsh(p) > 0)
-
-
-def test_a_wall_fixes_the_pose_across_it_and_not_along_it() -> None:
-    """A wall at x = 3 seen from a pose that drifted 0.2 m in x and y: x is pulled back, y stays."""
-    true = np.array([0.0, 0.0, 0.0])
-    s, anchor = np.array([3.0, 0.0]), np.zeros(2)  # the wall x = 3, seen from the origin
-    s_cov = np.eye(2) * 1e-6
-    z = wall_model.predict(s, anchor, true)
-    r = np.eye(2) * 1e-4
-    x, p = np.array([0.2, 0.2, 0.0]), np.diag([0.1, 0.1, 1e-6])
-    innov = ekf.innovation(s, s_cov, anchor, z, r, x, p)
-    jacobian = wall_model.jacobian_pose(s, anchor, x)
-    x_new, p_new = pose_ekf.correct(x, p, innov.residual, innov.cov, jacobian)
-    assert abs(x_new[0]) < 0.01, "across the wall: fixed"
-    assert abs(x_new[1] - 0.2) < 1e-6, "along the wall: the drift stays"
-    assert p_new[0, 0] < 0.01 * p[0, 0]
-    assert math.isclose(p_new[1, 1], p[1, 1], rel_tol=1e-6), "and its uncertainty shows"

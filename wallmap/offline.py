@@ -80,8 +80,9 @@ def map_bag(
             )
             observations = wall_detector.detect(message)
             if corrector is not None:
-                pose = corrector.step(observations, pose, wall_map)
-            wall_map.integrate(observations, pose)
+                pose = corrector.integrate(observations, pose, wall_map)
+            else:
+                wall_map.integrate(observations, pose)
             if poses is not None:
                 poses.append(pose)
             if tracker is not None and tracker.config.use_walls:

@@ -446,6 +446,7 @@ def write_scene_bag(
     plan: FloorPlan | None = None,
     rate_hz: float = 15.0,
     compress: bool = False,
+    odometry_drift: tuple[float, float] = (0.02, 1.0),
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
@@ -475,6 +476,8 @@ def write_scene_bag(
         plan: Scene to drive through (must have a route); generated if None.
         rate_hz: Sensor frame rate.
         compress: LZ4 chunk compression (ROS 1 only), for bags that ship in a repository.
+        odometry_drift: How /odom drifts: its position error per metre (0.02 = 2 %) and its
+            heading error in degrees per metre (``drifting_odometry``).
 
     Returns:
         What was written, including the per-wall seen counts.
@@ -496,7 +499,8 @@ def write_scene_bag(
     fine = generate_trajectory(plan, traj_seed, rate_hz=2 * rate_hz)
     n_frames = min(n_frames, (len(fine) + 1) // 2)
     fine = fine.sliced(slice(0, 2 * n_frames - 1))
-    odom = drifting_odometry(fine, odom_seed)
+    odom = drifting_odometry(fine, odom_seed, drift_xy=odometry_drift[0],
+                             drift_yaw_deg=odometry_drift[1])  # fmt: skip
     truth = fine.sliced(slice(None, None, 2))
     twist = _body_twist(odom)
     stamps_ns = [stamp_to_ns(s) for s in fine.stamps]

@@ -161,7 +161,10 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     if wall_map.walls:
         log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
     runs = state_file.load_runs(mapper.state) if mapper.state else []
-    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs, _corrector(mapper))
+    corrector = _corrector(mapper)
+    if corrector is not None:
+        corrector.check(wall_map)
+    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs, corrector)
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
@@ -418,9 +421,10 @@ class _Waiting:
             if integrated:
                 if core.corrector is not None and self.corrected is not None:
                     odom_frame = pose.frame
-                    pose = core.corrector.step(obs, pose, core.map)
+                    pose = core.corrector.integrate(obs, pose, core.map)
                     self.corrected.publish(core.corrector, pose, odom_frame)
-                core.map.integrate(obs, pose)
+                else:
+                    core.map.integrate(obs, pose)
                 core.dirty = True
             self._done(obs, integrated=integrated)
         if integrated:

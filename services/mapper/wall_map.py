@@ -349,14 +349,18 @@ class WallMap:
             self._integrate_one(obs, pose_vec, pose_cov, frame.stamp, depth=depth)
             for obs in frame.walls
         ]
+        self.finish_frame(frame, pose)
+        return ids
+
+    def finish_frame(self, frame: Observations, pose: Pose) -> None:
+        """After a frame's observations: what its rays saw through, the counters, a keyframe."""
         if frame.rays is not None and frame.ray_origin is not None and len(frame.rays):
-            self._see_through(frame.ray_origin, frame.rays, pose_vec)
+            self._see_through(frame.ray_origin, frame.rays, pose.vector)
         self.frames += 1
         self.version += 1
-        self.observations += len(ids)
+        self.observations += len(frame.walls)
         self.stamp = frame.stamp if self.stamp is None else max(self.stamp, frame.stamp)
         self._keep_keyframe(pose)
-        return ids
 
     def _see_through(self, origin: Array, ends: Array, pose: Array) -> None:
         """Count the rays that crossed walls well before they ended (see ``Extent``).
@@ -392,15 +396,23 @@ class WallMap:
     def _integrate_one(
         self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float, *, depth: bool
     ) -> int:
-        seg = _segment_in_map(obs, pose)
         best = self.match(obs, pose, pose_cov)
         if best is None:
-            wall_id = self._new_wall(obs, pose, pose_cov, seg, stamp)
-            self.walls[wall_id].depth_obs = int(depth)
-            return wall_id
+            s, p, anchor = ekf.initial_state(obs.closest, obs.cov, pose, pose_cov)
+            return self.add_wall(obs, s, p, anchor, pose, stamp, depth=depth).id
         wall, innov = best
-        wall.depth_obs += int(depth)
         wall.set_state(*ekf.update(wall.s, wall.p, innov))
+        return self.observed(wall, obs, pose, stamp, depth=depth).id
+
+    def observed(
+        self, wall: Wall, obs: WallObservation, pose: Array, stamp: float, *, depth: bool
+    ) -> Wall:
+        """Account for an observation whose update ``wall`` has taken: extent, counts, merges.
+
+        Returns the wall that holds the observation now (another, if this one merged into it).
+        """
+        seg = _segment_in_map(obs, pose)
+        wall.depth_obs += int(depth)
         wall.extend(seg)
         self.index.file(wall.id, wall.ends)
         wall.extent.add(seg)
@@ -411,7 +423,11 @@ class WallMap:
             wall.views += 1
             wall.last_view = pose.copy()
         self.changed.add(wall.id)
-        return self._merge_duplicates(wall, stamp).id
+        return self._merge_duplicates(wall, stamp)
+
+    def near_observation(self, obs: WallObservation, pose: Array) -> list[Wall]:
+        """The walls that may have made ``obs`` seen from ``pose``: association's candidates."""
+        return self._near(_segment_in_map(obs, pose))
 
     def match(
         self, obs: WallObservation, pose: Array, pose_cov: Array, min_obs: int = 0
@@ -422,7 +438,7 @@ class WallMap:
         covariance (wall, observation and pose). ``min_obs``: only walls seen that often.
         """
         best: tuple[float, Wall, ekf.Innovation] | None = None
-        for wall in self._near(_segment_in_map(obs, pose)):
+        for wall in self.near_observation(obs, pose):
             if wall.n_obs < min_obs:
                 continue
             innov = ekf.innovation(
@@ -555,18 +571,30 @@ class WallMap:
                 near.append(wall)
         return near
 
-    def _new_wall(
-        self, obs: WallObservation, pose: Array, pose_cov: Array, seg: Array, stamp: float
-    ) -> int:
-        s, p, anchor = ekf.initial_state(obs.closest, obs.cov, pose, pose_cov)
+    def add_wall(
+        self,
+        obs: WallObservation,
+        s: Array,
+        p: Array,
+        anchor: Array,
+        pose: Array,
+        stamp: float,
+        *,
+        depth: bool,
+    ) -> Wall:
+        """Start a wall at state ``(s, p, anchor)`` from its first observation ``obs``."""
+        seg = _segment_in_map(obs, pose)
         extent = Extent(anchor + s, wall_model.direction(s))
-        wall = Wall(self.next_id, s, p, anchor, seg.copy(), extent, 1, stamp, stamp, 1, pose.copy())
+        wall = Wall(
+            self.next_id, s, p, anchor, seg.copy(), extent, 1, stamp, stamp, 1, pose.copy(),
+            int(depth),
+        )  # fmt: skip
         wall.extend(seg)  # puts the end points on the line
         extent.add(seg)
         self.restore(wall)
         self.changed.add(wall.id)
         self.next_id += 1
-        return wall.id
+        return wall
 
     def _shadowed(self, wall: Wall) -> bool:
         """Whether far better supported walls run along most of this one (see MapperConfig).
