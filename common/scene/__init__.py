@@ -1,6 +1,6 @@
 """Synthetic scenes: floor plans, trajectories, depth rendering and ROS bags with truth."""
 
-from .bags import (
+from wallmap.common.scene.bags import (
     AMCL_COVARIANCE,
     AMCL_POSE_TOPIC,
     BASE_FRAME,
@@ -25,7 +25,7 @@ from .bags import (
     truth_path_for,
     write_scene_bag,
 )
-from .floorplan import (
+from wallmap.common.scene.floorplan import (
     FloorPlan,
     Furniture,
     Layout,
@@ -35,9 +35,9 @@ from .floorplan import (
     smooth_route,
     with_counters,
 )
-from .handheld import Handheld, HandheldStyle, write_handheld_recording
-from .kinds import SCENE_KINDS, SceneKind
-from .render import (
+from wallmap.common.scene.handheld import Handheld, HandheldStyle, write_handheld_recording
+from wallmap.common.scene.kinds import SCENE_KINDS, SceneKind
+from wallmap.common.scene.render import (
     Camera,
     Scanner,
     depth_to_points,
@@ -46,7 +46,7 @@ from .render import (
     scan_walls_seen,
     walls_seen,
 )
-from .trajectory import (
+from wallmap.common.scene.trajectory import (
     Trajectory,
     drifting_odometry,
     generate_trajectory,

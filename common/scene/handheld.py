@@ -31,8 +31,7 @@ from wallmap.common.pose3d import (
     quaternion_from_matrix,
     rotation_matrix,
 )
-
-from .bags import (
+from wallmap.common.scene.bags import (
     CAMERA_INFO_TOPIC,
     CAMERA_LINK_FRAME,
     IMAGE_TOPIC,
@@ -50,9 +49,9 @@ from .bags import (
     transform_stamped,
     truth_path_for,
 )
-from .floorplan import FloorPlan
-from .render import Camera, render_depth, walls_seen
-from .trajectory import generate_trajectory
+from wallmap.common.scene.floorplan import FloorPlan
+from wallmap.common.scene.render import Camera, render_depth, walls_seen
+from wallmap.common.scene.trajectory import generate_trajectory
 
 HandheldStyle = Literal["camera", "robot", "tum"]
 MAP_FRAME, BASE_FRAME = "map", "base_link"

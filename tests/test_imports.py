@@ -1,0 +1,91 @@
+"""The package as tools see it: every ``wallmap`` import resolves statically, layers hold.
+
+The user's layout keeps ``common/`` and ``services/`` at the top of the checkout; the package
+reaches them through the links ``wallmap/common`` and ``wallmap/services``, and the editable
+install is a plain path (no import hook), so an IDE's go-to-definition and a static analyser
+follow every import. basedpyright runs here with type checking off and only unresolved imports
+as errors.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _imports(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.append(node.module)
+    return names
+
+
+def test_the_package_links_to_the_users_layout() -> None:
+    for name in ("common", "services"):
+        link = ROOT / "wallmap" / name
+        assert link.is_symlink()
+        assert link.resolve() == (ROOT / name).resolve()
+
+
+def test_common_imports_nothing_above_it() -> None:
+    """The maths and the plumbing under everything: no service, no command, no tool."""
+    offenders = {
+        f"{path.relative_to(ROOT)}: {name}"
+        for path in (ROOT / "common").rglob("*.py")
+        for name in _imports(path)
+        if name.startswith("wallmap.") and not name.startswith("wallmap.common")
+    }
+    assert not offenders, sorted(offenders)
+
+
+def test_services_import_no_command_or_tool() -> None:
+    offenders = {
+        f"{path.relative_to(ROOT)}: {name}"
+        for path in (ROOT / "services").rglob("*.py")
+        for name in _imports(path)
+        if name.startswith("wallmap.")
+        and not name.startswith(("wallmap.common", "wallmap.services"))
+    }
+    assert not offenders, sorted(offenders)
+
+
+def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
+    exe = shutil.which("basedpyright", path=str(Path(sys.executable).parent))
+    if exe is None:
+        pytest.fail("basedpyright is missing: install the dev extra (make test does)")
+    config = {
+        "include": [str(ROOT / name) for name in ("common", "services", "wallmap")],
+        "typeCheckingMode": "off",
+        "reportMissingImports": "error",
+        "venvPath": str(Path(sys.prefix).parent),
+        "venv": Path(sys.prefix).name,
+    }
+    (tmp_path / "pyrightconfig.json").write_text(json.dumps(config))
+    done = subprocess.run(
+        [exe, "-p", str(tmp_path / "pyrightconfig.json"), "--outputjson"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    report = json.loads(done.stdout)
+    unresolved = [
+        f"{d['file']}:{d['range']['start']['line'] + 1}: {d['message']}"
+        for d in report["generalDiagnostics"]
+        if d.get("rule") == "reportMissingImports"
+    ]
+    assert report["summary"]["filesAnalyzed"] > 50
+    assert not unresolved, unresolved
+    assert report["summary"]["errorCount"] == 0, report["generalDiagnostics"][:5]
