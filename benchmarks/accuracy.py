@@ -7,7 +7,8 @@ default to 500-502, away from the ones the detector and mapper were tuned on (1-
 the ones the tests use. Results are in docs/accuracy.md.
 
     .venv/bin/python benchmarks/accuracy.py [--frames N] [--scenes a,b] [--seeds 500,501]
-        [--poses tf,odom,slam] [--detector-noise-k K] [--jobs 2] [--details] [--quick]
+        [--poses tf,odom,slam] [--detector-noise-k K] [--set SECTION.KEY=VALUE] [--jobs 2]
+        [--details] [--quick]
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from wallmap.common.evaluation import MapScore, evaluate_map
-from wallmap.common.ransac import RansacParams
 from wallmap.common.scene import (
     SCENE_KINDS,
     FloorPlan,
@@ -33,9 +33,8 @@ from wallmap.common.scene import (
     truth_path_for,
     write_scene_bag,
 )
+from wallmap.config import configured
 from wallmap.offline import map_bag, walls
-from wallmap.services.detector.detector import DetectorConfig
-from wallmap.services.mapper.pose_correction import SlamConfig
 
 POSE_SOURCES = ("tf", "odom", "slam")
 HEADER = """\
@@ -81,7 +80,7 @@ def run_scene(
     seed: int,
     frames: int,
     poses: Sequence[str],
-    detector: DetectorConfig | None = None,
+    settings: tuple[str, ...] = (),
     bags: Path | None = None,
     drift: tuple[float, float] = (0.02, 1.0),
 ) -> list[Result]:
@@ -107,9 +106,13 @@ def run_scene(
         results = []
         for pose_source in poses:
             start = time.perf_counter()
-            slam = SlamConfig() if pose_source == "slam" else None
             source = "odom" if pose_source == "slam" else pose_source
-            wall_map = map_bag(info.path, detector=detector, pose_source=source, slam=slam)
+            config = configured(
+                *settings,
+                f"player.source.pose_source={source}",
+                f"mapper.slam.enabled={str(pose_source == 'slam').lower()}",
+            )
+            wall_map = map_bag(info.path, config)
             seconds = time.perf_counter() - start
             score = evaluate_map(walls(wall_map), info.plan, info.seen_counts)
             details = _describe(score, info.plan, info.seen_counts)
@@ -159,6 +162,13 @@ def main() -> None:
         help="depth noise the detector assumes (default: its own, a Kinect's 1.425e-3)",
     )
     parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="a configuration key for every map (as wallmap --set), repeatable",
+    )
+    parser.add_argument(
         "--odom-drift",
         default="0.02,1.0",
         help="how /odom drifts: position error per metre, heading error in degrees per metre",
@@ -178,9 +188,9 @@ def main() -> None:
         seeds, frames = seeds[:1], min(frames, 150)
     poses = args.poses.split(",")
     drift_xy, drift_yaw = (float(v) for v in args.odom_drift.split(","))
-    detector = None
+    settings = tuple(args.set)
     if args.detector_noise_k is not None:
-        detector = DetectorConfig(ransac=RansacParams(noise_k=args.detector_noise_k))
+        settings += (f"detector.ransac.noise_k={args.detector_noise_k!r}",)
 
     if args.bags:
         args.bags.mkdir(parents=True, exist_ok=True)
@@ -188,7 +198,7 @@ def main() -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
             (kind, seed): pool.submit(
-                run_scene, kind, seed, frames, poses, detector, args.bags, (drift_xy, drift_yaw)
+                run_scene, kind, seed, frames, poses, settings, args.bags, (drift_xy, drift_yaw)
             )
             for kind in kinds
             for seed in seeds
@@ -196,7 +206,7 @@ def main() -> None:
         results = [r for future in futures.values() for r in future.result()]
 
     print(HEADER)
-    assumed = "default" if detector is None else f"{args.detector_noise_k:g}"
+    assumed = "default" if args.detector_noise_k is None else f"{args.detector_noise_k:g}"
     print(f"Seeds {','.join(map(str, seeds))}, up to {frames} frames per scene, ", end="")
     print(f"detector noise_k {assumed}, odometry drift {args.odom_drift}.\n")
     print(

@@ -21,11 +21,10 @@ import numpy as np
 from mapper_scaling import build
 
 from wallmap.common.codec import decode, encode
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.launcher import free_loopback_port
-from wallmap.map_client import QueryError, fetch_map
 from wallmap.services.mapper import state_file
-from wallmap.services.mapper.wall_map import MapQuery
 
 
 def wait_for_map(settings: ZenohSettings, walls: int) -> None:

@@ -35,12 +35,12 @@ from wallmap.common.map_consistency import (
     duplicates,
     place_scan,
 )
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Pose
 from wallmap.common.scene import load_truth, write_scene_bag
+from wallmap.config import configured
 from wallmap.offline import map_bag, scan_rows
 from wallmap.plot import write_picture
-from wallmap.services.mapper.wall_map import MapQuery
-from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 
@@ -63,7 +63,8 @@ def real_bags(out: Path | None) -> None:
         for use_walls in (False, True):
             poses: list[Pose] = []
             start = time.perf_counter()
-            wall_map = map_bag(bag, odometry=OdometryConfig(use_walls=use_walls), poses=poses)
+            config = configured("up.odometry=true", f"odometry.use_walls={str(use_walls).lower()}")
+            wall_map = map_bag(bag, config, poses=poses)
             per_scan = (time.perf_counter() - start) / max(n_scans, 1) * 1e3
             reply = wall_map.reply(MapQuery(trajectory=True))
             walls = [MappedWall.from_reply(w) for w in reply["walls"]]
@@ -93,17 +94,15 @@ def drift(seeds: list[int], frames: int) -> None:
             info = write_scene_bag(bag, seed=seed, n_frames=frames, fmt="ros1", sensor="laserscan")
             plan, trajectory, seen = load_truth(info.truth_path)
             start = trajectory.pose_at(0)
-            for label, kwargs in (
-                ("wheel odometry (/odom)", {"pose_source": "odom"}),
-                (
-                    "scan matching",
-                    {"odometry": OdometryConfig(initial_pose=start, use_walls=False)},
-                ),
-                ("scan matching + walls", {"odometry": OdometryConfig(initial_pose=start)}),
-                ("true poses (tf)", {"pose_source": "tf"}),
+            tracked = ("up.odometry=true", f"odometry.initial_pose={list(start)}")
+            for label, settings in (
+                ("wheel odometry (/odom)", ("player.source.pose_source=odom",)),
+                ("scan matching", (*tracked, "odometry.use_walls=false")),
+                ("scan matching + walls", tracked),
+                ("true poses (tf)", ("player.source.pose_source=tf",)),
             ):
                 poses: list[Pose] = []
-                wall_map = map_bag(bag, poses=poses, **kwargs)
+                wall_map = map_bag(bag, configured(*settings), poses=poses)
                 score = evaluate_map(wall_map.reply(MapQuery())["walls"], plan, seen)
                 index = [int(np.argmin(np.abs(trajectory.stamps - p.stamp))) for p in poses]
                 error = statistics.median(

@@ -24,16 +24,19 @@ from pathlib import Path
 import numpy as np
 
 from wallmap.common.map_consistency import MappedWall, distance_to_walls, duplicates, fans
+from wallmap.common.map_query import MapQuery
+from wallmap.config import Config
 from wallmap.offline import map_bag, points_at_heights, walls
 from wallmap.plot import write_picture
 from wallmap.recordings import RGBD, tum_as_bag
-from wallmap.services.mapper.wall_map import MapQuery
+from wallmap.services.player.service import PlayerSettings
 from wallmap.services.player.sources import SourceOptions
 
 
 def row(name: str, way: str, recording: Path, options: SourceOptions, out: Path | None) -> None:
+    config = Config(player=PlayerSettings(source=options))
     start = time.perf_counter()
-    wall_map = map_bag(recording, source=options)
+    wall_map = map_bag(recording, config)
     seconds = time.perf_counter() - start
     served = walls(wall_map, min_obs=3)
     mapped = [MappedWall.from_reply(w) for w in served]

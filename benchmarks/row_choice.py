@@ -16,6 +16,7 @@ from pathlib import Path
 from wallmap.common.evaluation import evaluate_map
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.config import Config
 from wallmap.offline import map_bag, walls
 from wallmap.services.detector.detector import DetectorConfig
 
@@ -51,7 +52,7 @@ def main() -> None:
             for name, rows in CHOICES.items():
                 scores = [
                     evaluate_map(
-                        walls(map_bag(info.path, detector=DetectorConfig(rows=rows))),
+                        walls(map_bag(info.path, Config(detector=DetectorConfig(rows=rows)))),
                         info.plan,
                         info.seen_counts,
                     )

@@ -1,24 +1,23 @@
-"""Zenoh sessions from one set of flags, and the key space.
+"""Zenoh sessions from one set of settings, and the key space.
 
-Every subcommand that talks Zenoh takes the same flags (``--connect``, ``--prefix``,
-``--zenoh-config``; env ``WALLMAP_CONNECT``, ``WALLMAP_PREFIX``). The config file is applied first
-and the flags override it. Multicast scouting is off unless that file turns it on, so nothing
-joins a stranger's network by accident.
+Every subcommand that talks Zenoh takes the same settings (the ``zenoh`` section of the
+configuration: ``--connect``, ``--prefix``, ``--zenoh-config``; env ``WALLMAP_CONNECT``,
+``WALLMAP_PREFIX``). The Zenoh json5 file is applied first and the settings override it.
+Multicast scouting is off unless that file turns it on, so nothing joins a stranger's network by
+accident.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
-import os
 import re
 import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import zenoh
@@ -37,51 +36,34 @@ class TransportError(RuntimeError):
 
 @dataclass(frozen=True)
 class ZenohSettings:
-    """Where and how to connect.
+    """Where and how to connect: the ``zenoh`` section of the configuration.
 
     Attributes:
-        connect: endpoints of routers (or peers) to connect to.
-        prefix: first key segment(s) of every key, so several robots can share a network.
-        config_file: a Zenoh json5 config applied before the flags.
-        wait_for_router: seconds to keep trying to reach the router at start: ``inf`` for
+        connect: Endpoints of routers (or peers) to connect to.
+        prefix: First key segment(s) of every key, so several robots can share a network.
+        config_file: A Zenoh json5 config applied before these settings (TLS, access control).
+        wait_for_router: Seconds to keep trying to reach the router at start: ``inf`` for
             services (they may start before their router), a few seconds for commands a person
-            runs, 0 to fail at once.
+            runs, 0 to fail at once. Each command decides it; it is not configuration.
     """
 
     connect: tuple[str, ...] = (DEFAULT_CONNECT,)
     prefix: str = DEFAULT_PREFIX
     config_file: Path | None = None
-    wait_for_router: float = 0.0
+    wait_for_router: float = field(default=0.0, metadata={"config": False})
 
-
-def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the contract's Zenoh flags to a subcommand."""
-    group = parser.add_argument_group("zenoh")
-    group.add_argument(
-        "--connect",
-        action="append",
-        metavar="ENDPOINT",
-        help=f"router endpoint, repeatable (default {DEFAULT_CONNECT}; env WALLMAP_CONNECT)",
-    )
-    group.add_argument(
-        "--prefix", metavar="PREFIX", help="key prefix (default wallmap; env WALLMAP_PREFIX)"
-    )
-    group.add_argument(
-        "--zenoh-config", type=Path, metavar="FILE", help="Zenoh json5 config applied first"
-    )
-
-
-def settings_from_args(args: argparse.Namespace, *, wait_for_router: float) -> ZenohSettings:
-    """Resolve flags, then environment, then defaults."""
-    connect = args.connect
-    if not connect:
-        env = os.environ.get("WALLMAP_CONNECT", "")
-        connect = [e.strip() for e in env.split(",") if e.strip()] or [DEFAULT_CONNECT]
-    prefix = (args.prefix or os.environ.get("WALLMAP_PREFIX") or DEFAULT_PREFIX).strip("/")
-    if not prefix or any(c in prefix for c in "*$?#"):
-        msg = f"invalid --prefix {prefix!r}: it must be a plain key expression such as robot1/run2"
-        raise TransportError(msg)
-    return ZenohSettings(tuple(connect), prefix, args.zenoh_config, wait_for_router)
+    def __post_init__(self) -> None:
+        prefix = self.prefix.strip("/")
+        if not prefix or any(c in prefix for c in "*$?#"):
+            msg = (
+                f"invalid prefix {self.prefix!r} (--prefix, zenoh.prefix): use a plain key "
+                "expression such as robot1/run2"
+            )
+            raise TransportError(msg)
+        if not self.connect:
+            msg = "no endpoint to connect to"
+            raise TransportError(msg)
+        object.__setattr__(self, "prefix", prefix)
 
 
 def zenoh_reason(err: Exception) -> str:

@@ -18,6 +18,7 @@ from wallmap.common.scene import write_scene_bag
 from wallmap.doctor import add_command, render_text, report_json
 from wallmap.doctor_facts import Report
 from wallmap.doctor_inspect import inspect_bag
+from wallmap.options import given
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 
@@ -165,7 +166,8 @@ def test_add_command_adds_doctor_to_wallmap_subcommands() -> None:
     parser = argparse.ArgumentParser(prog="wallmap")
     add_command(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["doctor", "some.bag", "--json", "--sensor-topic", "/scan"])
-    assert (args.bag, args.json, args.sensor_topic) == (Path("some.bag"), True, "/scan")
+    assert (args.bag, args.json) == (Path("some.bag"), True)
+    assert given(args, args.options) == {"player": {"source": {"sensor_topic": "/scan"}}}
     assert callable(args.func)
 
 

@@ -19,14 +19,17 @@ from PIL import Image
 from wallmap.common.evaluation import evaluate_map
 from wallmap.common.map_consistency import MappedWall, fans
 from wallmap.common.scene import SCENE_KINDS, Camera, Handheld, write_handheld_recording
+from wallmap.config import configured
 from wallmap.offline import map_bag, walls
-from wallmap.services.player.sources import SourceOptions
 from wallmap.services.player.tum_folder import read_depth_png
 
 SEED = 41
 CAMERA = Camera(width=128, height=96)
 HANDHELD = Handheld(frame_tilt_deg=30.0, floor_z=-1.3)
-TUM = SourceOptions(intrinsics=(CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy), depth_scale=1000)
+TUM = configured(
+    f"player.source.intrinsics={[CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy]}",
+    "player.source.depth_scale=1000",
+)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +54,7 @@ def score(info, reply_walls):
 @pytest.mark.parametrize("style", ["camera", "robot", "tum"])
 def test_a_handheld_camera_in_a_tilted_frame_maps_the_walls_not_the_clutter(recordings, style):
     info = recordings[style]
-    wall_map = map_bag(info.path, source=TUM if style == "tum" else None)
+    wall_map = map_bag(info.path, TUM if style == "tum" else None)
     assert wall_map.frames == info.n_frames
     served = walls(wall_map, min_obs=3)
     result = score(info, served)
@@ -67,7 +70,9 @@ def test_without_levelling_the_tilted_frame_gives_no_map(recordings):
     """What --level none does to a frame tilted 30 degrees: the band is not where the walls are."""
     info = recordings["camera"]
     levelled = score(info, walls(map_bag(info.path), min_obs=3))
-    as_is = score(info, walls(map_bag(info.path, source=SourceOptions(level="none")), min_obs=3))
+    as_is = score(
+        info, walls(map_bag(info.path, configured("player.source.level=none")), min_obs=3)
+    )
     assert as_is.recall < levelled.recall - 0.5
 
 
@@ -75,7 +80,7 @@ def test_without_levelling_the_tilted_frame_gives_no_map(recordings):
 def test_up_plays_a_tum_folder_through_the_services(recordings, tmp_path):
     info = recordings["tum"]
     out = tmp_path / "map.json"
-    fx, fy, cx, cy = TUM.intrinsics
+    fx, fy, cx, cy = TUM.player.source.intrinsics
     done = run_wallmap(
         "up", str(info.path), "--fast", "--exit-when-done", "--json-out", str(out),
         "--intrinsics", f"{fx},{fy},{cx},{cy}", "--depth-scale", "1000",

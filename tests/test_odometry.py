@@ -14,6 +14,7 @@ import pytest
 from wallmap.common.codec import MessageError
 from wallmap.common.evaluation import MapScore, evaluate_map
 from wallmap.common.scene import load_truth, write_scene_bag
+from wallmap.config import configured
 from wallmap.offline import map_bag, walls
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker, wall_lines
 
@@ -28,11 +29,11 @@ def scene(tmp_path_factory):
     return bag, plan, trajectory, seen
 
 
-def _mapped(scene, **kwargs) -> tuple[MapScore, float]:
+def _mapped(scene, *settings: str) -> tuple[MapScore, float]:
     """The map's score and the median position error of the poses used."""
     bag, plan, trajectory, seen = scene
     poses = []
-    wall_map = map_bag(bag, poses=poses, **kwargs)
+    wall_map = map_bag(bag, configured(*settings), poses=poses)
     errors = [
         math.hypot(p.x - trajectory.x[i], p.y - trajectory.y[i])
         for p in poses
@@ -44,9 +45,10 @@ def _mapped(scene, **kwargs) -> tuple[MapScore, float]:
 def test_wall_refined_scan_matching_beats_wheel_odometry(scene) -> None:
     """Issue 8's bar: at least the odometry's precision and recall, at most half its offset."""
     start = scene[2].pose_at(0)
-    odom, odom_error = _mapped(scene, pose_source="odom")
-    icp, icp_error = _mapped(scene, odometry=OdometryConfig(initial_pose=start, use_walls=False))
-    refined, refined_error = _mapped(scene, odometry=OdometryConfig(initial_pose=start))
+    odom, odom_error = _mapped(scene, "player.source.pose_source=odom")
+    tracked = ("up.odometry=true", f"odometry.initial_pose={list(start)}")
+    icp, icp_error = _mapped(scene, *tracked, "odometry.use_walls=false")
+    refined, refined_error = _mapped(scene, *tracked)
     print(f"\nodom: {odom.summary()}; pose error {odom_error:.3f} m")
     print(f"scan matching: {icp.summary()}; pose error {icp_error:.3f} m")
     print(f"scan matching + walls: {refined.summary()}; pose error {refined_error:.3f} m")

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from wallmap.common import wall_model
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.services.mapper.wall_map import MapQuery, WallMap
+from wallmap.services.mapper.wall_map import WallMap
 
 NOISE = 0.005
 POSE_COV = np.diag([0.005**2, 0.005**2, np.radians(0.1) ** 2])  # a good localiser

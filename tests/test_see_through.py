@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from wallmap.common import wall_model
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import state_file
-from wallmap.services.mapper.wall_map import MapQuery, WallMap
+from wallmap.services.mapper.wall_map import WallMap
 
 NOISE = 0.01
 

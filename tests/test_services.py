@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 
@@ -13,12 +12,9 @@ from wallmap.common.codec import decode
 from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import (
     Keys,
-    TransportError,
     ZenohSettings,
-    add_zenoh_arguments,
     make_config,
     open_session,
-    settings_from_args,
 )
 
 
@@ -67,30 +63,6 @@ def test_real_time_playback_keeps_the_bag_timing_and_loses_nothing_uncounted(sta
     reply, skipped = stack.settled_frames(60)
     assert reply["frames"] + skipped == 60  # integrated, or skipped and counted
     assert skipped <= 6
-
-
-def parse(argv: list[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser()
-    add_zenoh_arguments(parser)
-    return parser.parse_args(argv)
-
-
-def test_settings_come_from_flags_then_environment_then_defaults(monkeypatch):
-    monkeypatch.delenv("WALLMAP_CONNECT", raising=False)
-    monkeypatch.delenv("WALLMAP_PREFIX", raising=False)
-    default = settings_from_args(parse([]), wait_for_router=0.0)
-    assert default == ZenohSettings()
-    monkeypatch.setenv("WALLMAP_CONNECT", "tcp/10.0.0.1:7447, tcp/10.0.0.2:7447")
-    monkeypatch.setenv("WALLMAP_PREFIX", "robot1/run2/")
-    env = settings_from_args(parse([]), wait_for_router=0.0)
-    assert env.connect == ("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447")
-    assert env.prefix == "robot1/run2"
-    flags = settings_from_args(
-        parse(["--connect", "tcp/127.0.0.1:9", "--prefix", "r9"]), wait_for_router=0.0
-    )
-    assert (flags.connect, flags.prefix) == (("tcp/127.0.0.1:9",), "r9")
-    with pytest.raises(TransportError, match="invalid --prefix"):
-        settings_from_args(parse(["--prefix", "a/**"]), wait_for_router=0.0)
 
 
 def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):

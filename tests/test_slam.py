@@ -20,8 +20,8 @@ from wallmap.common.evaluation import evaluate_map
 from wallmap.common.messages import unpack_pose
 from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.config import configured
 from wallmap.offline import map_bag, walls
-from wallmap.services.mapper.pose_correction import SlamConfig
 
 N_FRAMES = 600
 
@@ -61,9 +61,13 @@ FLOOR = {"depth": 0.9, "lidar": 0.9, "cloud": 0.85}
 def test_walls_correct_drifting_odometry(scenes, sensor) -> None:
     scene = scenes[sensor]
     drifting: list = []
-    plain = map_bag(scene.path, pose_source="odom", poses=drifting)
+    plain = map_bag(scene.path, configured("player.source.pose_source=odom"), poses=drifting)
     corrected: list = []
-    slam = map_bag(scene.path, pose_source="odom", slam=SlamConfig(), poses=corrected)
+    slam = map_bag(
+        scene.path,
+        configured("player.source.pose_source=odom", "mapper.slam.enabled=true"),
+        poses=corrected,
+    )
     before = evaluate_map(walls(plain, 3), scene.plan, scene.seen_counts)
     after = evaluate_map(walls(slam, 3), scene.plan, scene.seen_counts)
     error_before = _trajectory_error(drifting, scene.trajectory)
@@ -82,7 +86,7 @@ def test_walls_correct_drifting_odometry(scenes, sensor) -> None:
 def test_without_slam_the_poses_are_used_as_they_come(scenes) -> None:
     scene = scenes["depth"]
     used: list = []
-    map_bag(scene.path, pose_source="odom", poses=used)
+    map_bag(scene.path, configured("player.source.pose_source=odom"), poses=used)
     assert all(p.cov is None or p.cov.shape == (3, 3) for p in used)
     assert _trajectory_error(used, scene.trajectory) > 0.3, "raw odometry: the drift stays"
 

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from wallmap.common import wall_model
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import state_file
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer
-from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
+from wallmap.services.mapper.wall_map import MapperConfig, WallMap
 
 # A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
 WALLS = [

@@ -53,3 +53,29 @@ def intrinsics(value: str) -> tuple[float, float, float, float]:
         msg = f"FX,FY must be positive and all four finite, got {value!r}"
         raise argparse.ArgumentTypeError(msg)
     return fx, fy, cx, cy
+
+
+def planar_pose(value: str) -> tuple[float, float, float]:
+    """A planar pose as X,Y,YAW (metres, radians), all finite."""
+    try:
+        x, y, yaw = (float(v) for v in value.split(","))
+    except ValueError:
+        msg = f"expected X,Y,YAW (metres, radians), got {value!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not all(map(math.isfinite, (x, y, yaw))):
+        msg = f"X,Y,YAW must be finite, got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return x, y, yaw
+
+
+def band(value: str) -> tuple[float, float]:
+    """A height band as LOW,HIGH in metres, low below high."""
+    try:
+        low, high = (float(v) for v in value.split(","))
+    except ValueError as err:
+        msg = f"expected LOW,HIGH in metres, got {value!r}"
+        raise argparse.ArgumentTypeError(msg) from err
+    if not low < high:
+        msg = f"LOW must be below HIGH, got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return low, high

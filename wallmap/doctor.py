@@ -15,8 +15,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from wallmap.arg_types import finite, intrinsics, positive
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
+from wallmap.config import Config
 from wallmap.doctor_facts import (
     GAP_LIMIT,
     JUMP_LIMIT,
@@ -28,6 +28,8 @@ from wallmap.doctor_facts import (
     TopicFacts,
 )
 from wallmap.doctor_inspect import inspect_bag, inspect_tum
+from wallmap.options import SOURCE
+from wallmap.options import add_command as add_options_command
 from wallmap.services.player.bag_source import (
     CAMERA_INFO,
     IMAGE,
@@ -35,10 +37,7 @@ from wallmap.services.player.bag_source import (
     POINTCLOUD2,
     TF_TYPES,
 )
-from wallmap.services.player.sources import SourceOptions
 from wallmap.services.player.tum_folder import (
-    TUM_DEPTH_SCALE,
-    TUM_INTRINSICS,
     is_tum_folder,
 )
 
@@ -370,21 +369,26 @@ def report_json(report: Report) -> str:
     return json.dumps(facts, indent=2)
 
 
-def _cmd_doctor(args: argparse.Namespace) -> int:
+def _cmd_doctor(args: argparse.Namespace, config: Config) -> int:
+    source = config.player.source
     if is_tum_folder(args.bag):
-        source = SourceOptions(pose_source=args.pose_source, level=args.level,
-                               floor_z=args.floor_z, intrinsics=args.intrinsics,
-                               depth_scale=args.depth_scale)  # fmt: skip
         report = inspect_tum(args.bag, source)
     else:
-        report = inspect_bag(args.bag, args.sensor_topic)
+        report = inspect_bag(args.bag, source.sensor_topic)
     print(report_json(report) if args.json else render_text(report))
     return report.exit_status
 
 
 def add_command(sub: Any) -> None:
-    """Add ``doctor`` to the ``wallmap`` subcommands (``sub`` from ``add_subparsers``)."""
-    p = sub.add_parser("doctor", help="inspect a bag: what the player will use, and what is wrong")
+    """Add ``doctor`` to the ``wallmap`` subcommands (``sub`` from ``add_subparsers``).
+
+    It takes the player's flags for reading a recording (the TUM folder's camera, levelling),
+    so what it says is what the player will do with the same flags.
+    """
+    p = add_options_command(
+        sub, "doctor", "inspect a bag: what the player will use, and what is wrong", _cmd_doctor,
+        SOURCE,
+    )  # fmt: skip
     p.add_argument(
         "bag",
         type=Path,
@@ -392,14 +396,3 @@ def add_command(sub: Any) -> None:
         help="ROS 1 .bag file, ROS 2 bag folder, .mcap file or TUM RGB-D folder",
     )
     p.add_argument("--json", action="store_true", help="the same facts as JSON, for scripts")
-    p.add_argument(
-        "--sensor-topic", metavar="TOPIC", help="the sensor topic you would give the player"
-    )
-    tum = p.add_argument_group("TUM RGB-D folders")
-    tum.add_argument("--pose-source", metavar="SPEC", help="tum:FILE or none")
-    tum.add_argument("--level", choices=("auto", "none"), default="auto")
-    tum.add_argument("--floor-z", type=finite, metavar="Z")
-    tum.add_argument("--intrinsics", type=intrinsics, default=TUM_INTRINSICS,
-                     metavar="FX,FY,CX,CY")  # fmt: skip
-    tum.add_argument("--depth-scale", type=positive, default=TUM_DEPTH_SCALE, metavar="N")
-    p.set_defaults(func=_cmd_doctor)

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -25,15 +26,12 @@ import zenoh
 from wallmap import __version__
 from wallmap.arg_types import port, positive
 from wallmap.common.codec import MessageError, decode
+from wallmap.common.map_query import QueryError, fetch_map
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
-from wallmap.common.transport import (
-    Keys,
-    add_zenoh_arguments,
-    open_session,
-    settings_from_args,
-)
-from wallmap.map_client import QueryError, fetch_map
+from wallmap.common.transport import Keys, open_session
+from wallmap.config import Config, to_toml
+from wallmap.options import ZENOH, add_command
 
 EXTRA_MISSING = "the foxglove extra is not installed: pip install 'wallmap[foxglove]'"
 WAIT_FOR_ROUTER = 5.0  # s: a person runs these, so a missing router fails soon, in one line
@@ -45,7 +43,9 @@ REFUSALS = (MessageError, KeyError, TypeError, ValueError, OverflowError)
 
 def add_commands(sub: Any) -> None:
     """Add ``record`` and ``foxglove`` to the ``wallmap`` subcommands (``add_subparsers()``)."""
-    p = sub.add_parser("record", help="record a running system to an MCAP file for Foxglove")
+    p = add_command(
+        sub, "record", "record a running system to an MCAP file for Foxglove", _cmd_record, ZENOH
+    )
     p.add_argument("out", type=Path, metavar="OUT", help="MCAP file to write (must not exist)")
     p.add_argument("--duration", type=positive, metavar="S", help="stop after S seconds")
     p.add_argument(
@@ -55,16 +55,14 @@ def add_commands(sub: Any) -> None:
         help="stop once no message came for S seconds, counted from the first one (e.g. after "
         "a --fast playback; the map fetched at start does not count)",
     )
-    add_zenoh_arguments(p)
-    p.set_defaults(func=_cmd_record)
 
-    p = sub.add_parser("foxglove", help="serve a running system live to Foxglove (WebSocket)")
+    p = add_command(
+        sub, "foxglove", "serve a running system live to Foxglove (WebSocket)", _cmd_foxglove, ZENOH
+    )
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument(
         "--port", type=port, default=8765, help="WebSocket port (default 8765; 0: any free one)"
     )
-    add_zenoh_arguments(p)
-    p.set_defaults(func=_cmd_foxglove)
 
 
 def _bridge() -> ModuleType | None:
@@ -83,7 +81,7 @@ def _missing(args: argparse.Namespace) -> int:
     return 1
 
 
-def _cmd_record(args: argparse.Namespace) -> int:
+def _cmd_record(args: argparse.Namespace, config: Config) -> int:
     bridge = _bridge()
     if bridge is None:
         return _missing(args)
@@ -94,12 +92,13 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise FileExistsError(msg)
     log = setup_logging("record")
     stop = stop_on_signals()
-    settings = settings_from_args(args, wait_for_router=WAIT_FOR_ROUTER)
+    settings = replace(config.zenoh, wait_for_router=WAIT_FOR_ROUTER)
     context = foxglove.Context()
     with open_session(settings) as session:  # first, so no router leaves no empty file behind
         relay = _Relay(bridge, context, log)
         with foxglove.open_mcap(args.out, context=context) as writer:
             writer.write_metadata("wallmap", {"version": __version__, "prefix": settings.prefix})
+            writer.write_metadata("wallmap-config", {"toml": to_toml(config)})
             relay.run(
                 session, Keys(settings.prefix), "record", stop, args.duration, args.until_idle
             )
@@ -107,7 +106,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_foxglove(args: argparse.Namespace) -> int:
+def _cmd_foxglove(args: argparse.Namespace, config: Config) -> int:
     bridge = _bridge()
     if bridge is None:
         return _missing(args)
@@ -115,7 +114,7 @@ def _cmd_foxglove(args: argparse.Namespace) -> int:
 
     log = setup_logging("foxglove")
     stop = stop_on_signals()
-    settings = settings_from_args(args, wait_for_router=WAIT_FOR_ROUTER)
+    settings = replace(config.zenoh, wait_for_router=WAIT_FOR_ROUTER)
     context = foxglove.Context()
     relay = _Relay(bridge, context, log)
     try:

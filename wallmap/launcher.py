@@ -1,9 +1,10 @@
 """``wallmap up`` and ``wallmap demo``: a router and the services as processes, one command.
 
 Each service runs as its own process, exactly as in ``docker-compose.yml``, so what works here
-works there. The player waits for the detector and mapper to be live before its first frame and,
-at the end of the bag, for the mapper to acknowledge every frame; so when it exits, the map is
-complete and can be fetched.
+works there, and every one reads the same configuration: ``up`` writes the effective one to a
+file and starts each service with ``--config`` on it. The player waits for the detector and
+mapper to be live before its first frame and, at the end of the bag, for the mapper to
+acknowledge every frame; so when it exits, the map is complete and can be fetched.
 """
 
 from __future__ import annotations
@@ -14,56 +15,23 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
 from wallmap.common.evaluation import evaluate_map
-from wallmap.common.history import History
+from wallmap.common.map_query import fetch_map
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.map_client import fetch_map, format_table, to_json
+from wallmap.config import Config, UpSettings, to_plain, to_toml
+from wallmap.map_client import format_table, to_json
 from wallmap.plot import write_picture
-from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.service import PlayerSettings
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
-
-
-@dataclass(frozen=True)
-class UpOptions:
-    """What ``wallmap up`` runs and what it writes."""
-
-    bag: Path
-    fast: bool = False
-    rate: float = 1.0
-    source: SourceOptions = field(default_factory=SourceOptions)
-    band: tuple[float, float] | None = None
-    state: Path | None = None
-    exit_when_done: bool = False
-    json_out: Path | None = None
-    picture: Path | None = None
-    min_obs: int = 3
-    truth: Path | None = None
-    odometry: bool = False  # poses from the scans (wallmap odometry), for bags without poses
-    history: float = History.seconds  # s of the live streams kept for a service that restarts
-    slam: bool = False  # the mapper corrects the poses with the walls (mapper --slam)
-
-
-def source_flags(source: SourceOptions) -> list[str]:
-    """The player's command-line flags that read a recording as ``source`` says."""
-    flags = ["--level", source.level]
-    if source.pose_source is not None:
-        flags += ["--pose-source", source.pose_source]
-    if source.sensor_topic is not None:
-        flags += ["--sensor-topic", source.sensor_topic]
-    if source.topics is not None:
-        flags += ["--topics", ",".join(source.topics)]
-    if source.floor_z is not None:
-        flags += ["--floor-z", repr(source.floor_z)]
-    flags += ["--intrinsics", ",".join(repr(v) for v in source.intrinsics)]
-    return [*flags, "--depth-scale", repr(source.depth_scale)]
 
 
 def free_loopback_port() -> int:
@@ -135,58 +103,64 @@ def _processes(env: dict[str, str]) -> Iterator[_Services]:
     services.stop()
 
 
-def up(settings: ZenohSettings, options: UpOptions) -> int:
+def for_services(config: Config) -> Config:
+    """The configuration the services of ``up`` run with: the player waits for all of them.
+
+    With ``up.odometry`` the odometry service makes the poses, so the player sends none.
+    """
+    services = ("detector", "mapper") + (("odometry",) if config.up.odometry else ())
+    player = replace(config.player, wait_for=services)
+    if config.up.odometry:
+        player = replace(player, source=replace(player.source, pose_source="none"))
+    return replace(config, player=player)
+
+
+def up(config: Config, bag: Path) -> int:
     """Run router, mapper, detector and player; print the map when the bag is done."""
-    endpoint = settings.connect[0]
-    common = ["--connect", endpoint, "--prefix", settings.prefix]
-    common += ["--history", repr(options.history)]
-    if settings.config_file:
-        common += ["--zenoh-config", str(settings.config_file)]
-    env = {**os.environ, "WALLMAP_LOG": os.environ.get("WALLMAP_LOG", "WARNING")}
-    mapper_args = ["mapper", *common] + (["--state", str(options.state)] if options.state else [])
-    mapper_args += ["--slam"] if options.slam else []
-    speed = ["--fast"] if options.fast else ["--rate", str(options.rate)]
-    source = options.source
-    if options.odometry:
-        source = replace(source, pose_source="none")
-    services = ["detector", "mapper"] + (["odometry"] if options.odometry else [])
-    player_args = ["player", str(options.bag), *speed, *source_flags(source)]
-    player_args += ["--wait-for", ",".join(services), *common]
-    detector_args = ["detector", *common]
-    if options.band is not None:
-        detector_args += ["--band", f"{options.band[0]},{options.band[1]}"]
+    config = for_services(config)
+    env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
+    env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
     stop = stop_on_signals()
-    with _processes(env) as procs:
-        procs.start("router", "router", "--listen", endpoint, "--prefix", settings.prefix)
-        procs.start("mapper", *mapper_args)
-        procs.start("detector", *detector_args)
-        if options.odometry:
-            procs.start("odometry", "odometry", *common)
-        player = procs.start("player", *player_args)
-        while player.poll() is None and not stop.is_set():
-            procs.check_running()
-            stop.wait(0.1)
-        if stop.is_set():
-            return 0  # asked to stop (Ctrl-C, SIGTERM): the services stop cleanly
-        if player.returncode != 0:
-            return player.returncode
-        with open_session(settings) as session:
-            reply = fetch_map(
-                session, Keys(settings.prefix), min_obs=options.min_obs, trajectory=True
-            )
-        print(format_table(reply))
-        if options.truth:
-            plan, _, seen = load_truth(options.truth)
-            print(f"against the ground truth: {evaluate_map(reply['walls'], plan, seen).summary()}")
-        if options.json_out:
-            options.json_out.write_text(to_json(reply), encoding="utf-8")
-        if options.picture:
-            write_picture(options.picture, reply)
-            print(f"picture: {options.picture}")
-        if not options.exit_when_done:
-            print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
-            stop.wait()
+    with tempfile.TemporaryDirectory(prefix="wallmap-up-") as tmp:
+        path = Path(tmp) / "config.toml"
+        path.write_text(to_toml(config), encoding="utf-8")
+        with _processes(env) as procs:
+            listen = config.zenoh.connect[0]
+            procs.start("router", "router", "--config", str(path), "--listen", listen)
+            procs.start("mapper", "mapper", "--config", str(path))
+            procs.start("detector", "detector", "--config", str(path))
+            if config.up.odometry:
+                procs.start("odometry", "odometry", "--config", str(path))
+            player = procs.start("player", "player", str(bag), "--config", str(path))
+            while player.poll() is None and not stop.is_set():
+                procs.check_running()
+                stop.wait(0.1)
+            if stop.is_set():
+                return 0  # asked to stop (Ctrl-C, SIGTERM): the services stop cleanly
+            if player.returncode != 0:
+                return player.returncode
+            _report(config)
+            if not config.up.exit_when_done:
+                print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
+                stop.wait()
     return 0
+
+
+def _report(config: Config) -> None:
+    """The final map: printed, scored, written as JSON (with the configuration), drawn."""
+    options = config.up
+    with open_session(config.zenoh) as session:
+        reply = fetch_map(session, Keys(config.zenoh.prefix), min_obs=options.min_obs,
+                          trajectory=True)  # fmt: skip
+    print(format_table(reply))
+    if options.truth:
+        plan, _, seen = load_truth(options.truth)
+        print(f"against the ground truth: {evaluate_map(reply['walls'], plan, seen).summary()}")
+    if options.json_out:
+        options.json_out.write_text(to_json({**reply, "config": to_plain(config)}), "utf-8")
+    if options.picture:
+        write_picture(options.picture, reply)
+        print(f"picture: {options.picture}")
 
 
 def sample_bag() -> Path:
@@ -196,8 +170,12 @@ def sample_bag() -> Path:
 
 def demo(out: Path) -> int:
     """``wallmap up`` on the sample bag, on a private loopback port, with a picture."""
-    settings = ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",))
     bag = sample_bag()
-    truth = bag.with_name(bag.name + ".truth.json")
-    options = UpOptions(bag=bag, fast=True, exit_when_done=True, picture=out, truth=truth)
-    return up(settings, options)
+    config = Config(
+        zenoh=ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",)),
+        player=PlayerSettings(fast=True),
+        up=UpSettings(
+            exit_when_done=True, picture=out, truth=bag.with_name(bag.name + ".truth.json")
+        ),
+    )
+    return up(config, bag)

@@ -1,45 +1,9 @@
-"""Fetch the wall map over Zenoh and print it for people."""
+"""The wall map for people: a table, the contract's JSON."""
 
 from __future__ import annotations
 
 import json
 from typing import Any
-
-import zenoh
-
-from wallmap.common.codec import MessageError, decode
-from wallmap.common.transport import Keys
-
-
-class QueryError(RuntimeError):
-    """No usable map came back; the message says why, in one line."""
-
-
-def fetch_map(
-    session: zenoh.Session, keys: Keys, *, timeout: float = 5.0, **parameters: object
-) -> dict[str, Any]:
-    """Query ``{prefix}/map/walls`` with selector parameters and return the decoded reply.
-
-    Parameters are the mapper's (``min_obs``, ``tentative``, ``bbox``, ``since``,
-    ``trajectory``); None leaves one out, booleans become true/false.
-    """
-    pairs = [
-        f"{name}={str(value).lower() if isinstance(value, bool) else value}"
-        for name, value in parameters.items()
-        if value is not None
-    ]
-    selector = keys.map_walls + ("?" + ";".join(pairs) if pairs else "")
-    for reply in session.get(selector, timeout=timeout):
-        if reply.ok is None:
-            msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
-            raise QueryError(msg)
-        try:
-            return decode(reply.ok.payload.to_bytes())
-        except MessageError as err:
-            msg = f"the map reply is unreadable: {err}"
-            raise QueryError(msg) from err
-    msg = f"no mapper answered on {keys.map_walls} within {timeout:.0f} s"
-    raise QueryError(msg)
 
 
 def format_table(reply: dict[str, Any]) -> str:

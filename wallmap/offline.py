@@ -1,12 +1,14 @@
-"""The pipeline in one process, without Zenoh: for benchmarks, tuning and scripts.
+"""A whole recording through the pipeline in one process, without Zenoh.
 
-It runs exactly the code the services run (the detector and the wall map), frame by frame.
+For benchmarks, tuning, tests and scripts: ``map_bag`` reads a recording as the player does and
+runs each frame through ``services.pipeline.Pipeline``, the code the services run, on the same
+configuration (``wallmap.config.Config``), so a map made here is the map ``wallmap up`` makes.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -14,81 +16,49 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.map_consistency import place_scan
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Frame, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
-from wallmap.services.detector.detector import DetectorConfig, WallDetector
-from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
-from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
-from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
+from wallmap.config import Config
+from wallmap.services.mapper.wall_map import WallMap
+from wallmap.services.pipeline import Pipeline
 from wallmap.services.player.bag_source import LASERSCAN
 from wallmap.services.player.sources import SourceOptions, open_source
 
 Array = NDArray[np.float64]
 
 
-def map_bag(
-    bag: Path,
-    *,
-    detector: DetectorConfig | None = None,
-    mapper: MapperConfig | None = None,
-    pose_source: str | None = None,
-    odometry: OdometryConfig | None = None,
-    poses: list[Pose] | None = None,
-    source: SourceOptions | None = None,
-    slam: SlamConfig | None = None,
-) -> WallMap:
-    """Map a whole bag; frames without a pose are skipped.
+def pipeline_for(config: Config) -> Pipeline:
+    """The pipeline a configuration makes (``up.odometry``: poses from the scans)."""
+    return Pipeline(
+        config.detector,
+        config.mapper.map,
+        config.mapper.slam,
+        config.odometry if config.up.odometry else None,
+    )
 
-    Args:
-        bag: The bag.
-        detector: The detector's tuning.
-        mapper: The mapper's tuning.
-        pose_source: Where poses come from (``--pose-source``; None: the recording's default);
-            ignored with ``odometry``.
-        odometry: Estimate the poses from the scans instead, as ``wallmap odometry`` does, with
-            the walls fed back after every frame (the service gets them twice a second).
-        poses: If given, every pose used is appended to it.
-        source: How to read the recording (levelling, a TUM folder's camera).
-        slam: Take the poses as odometry and correct them with the walls (``mapper --slam``).
+
+def map_bag(bag: Path, config: Config | None = None, poses: list[Pose] | None = None) -> WallMap:
+    """Map a whole recording as ``config`` says; frames without a pose are skipped.
+
+    ``poses``: if given, every pose a frame was mapped from is appended to it.
     """
-    wall_detector = WallDetector(detector or DetectorConfig())
-    wall_map = WallMap(mapper)
-    tracker = PoseTracker(odometry) if odometry is not None else None
-    corrector = PoseCorrector(slam) if slam is not None else None
-    rows = wall_detector.config.rows
-    source_poses = "none" if tracker is not None else pose_source
-    options = dataclasses.replace(source or SourceOptions(), pose_source=source_poses)
-    with open_source(bag, options) as recording:
+    config = config or Config()
+    pipeline = pipeline_for(config)
+    source = config.player.source
+    if config.up.odometry:  # the scans make the poses: the recording's are not read
+        source = replace(source, pose_source="none")
+    with open_source(bag, source) as recording:
         sensor = "scan" if recording.sensor_type == LASERSCAN else "depth"
-        for seq, (frame, bag_pose) in enumerate(recording.frames(rows)):
-            pose = bag_pose
-            if tracker is not None:
-                stacked = frame.band is not None
-                scan = select_scan(frame.points, frame.T_base_sensor, rows, stacked)
-                pose = tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp).pose
-            if pose is None:
-                continue
+        for seq, (frame, pose) in enumerate(recording.frames(pipeline.rows)):
             message = Frame(
-                "offline",
-                seq,
-                frame.stamp,
-                frame.frame_id,
-                frame.points,
-                frame.T_base_sensor,
-                sensor,
-                band=frame.band,
-            )
-            observations = wall_detector.detect(message)
-            if corrector is not None:
-                pose = corrector.integrate(observations, pose, wall_map)
-            else:
-                wall_map.integrate(observations, pose)
-            if poses is not None:
-                poses.append(pose)
-            if tracker is not None and tracker.config.use_walls:
-                changes = wall_map.take_changes()
-                tracker.set_walls(changes["walls"], changes["removed"])
-    return wall_map
+                "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor,
+                sensor, band=frame.band,
+            )  # fmt: skip
+            step = pipeline.step(message, pose)
+            if step is not None and poses is not None:
+                poses.append(step.pose)
+    return pipeline.map
 
 
 def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[float, Array]]:

@@ -37,6 +37,8 @@ class SlamConfig:
     """Tuning of the pose correction.
 
     Attributes:
+        enabled: Correct the poses with the walls (``wallmap mapper --slam``); off, the poses
+            are used as they come and nothing below matters.
         noise: How uncertain the odometry is per step, once calibrated.
         calibration_sd: How far off the odometry's scale (a share) and heading (rad per metre)
             may be at the start: 5 % and 3 degrees per metre.
@@ -48,6 +50,7 @@ class SlamConfig:
             leave first): its cost grows with their square.
     """
 
+    enabled: bool = False
     noise: OdometryNoise = field(default_factory=OdometryNoise)
     calibration_sd: tuple[float, float] = (0.05, math.radians(3.0))
     calibration_drift: tuple[float, float] = (0.005, math.radians(0.2))

@@ -19,11 +19,13 @@ import uuid
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.history import History, subscribe_with_history
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, Progress, pack, unpack_observations
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -33,7 +35,8 @@ from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferCo
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
 from wallmap.services.mapper.ros2_out import Ros2Outlet
-from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
+from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.pipeline import Mapping
 
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
 MAX_RUNS = 16
@@ -57,10 +60,10 @@ class MapperSettings:
         gap_wait: longest a frame waits for earlier ones of its run (s, wall clock): missing
             frames come back from the history meanwhile, or are given up and counted as lost.
         save_every: seconds between state saves while the map changes.
-        history: the window of observations and poses asked for at start and recovered.
-        slam: take the poses as odometry and correct them with the walls (``--slam``), else
-            None: the poses are used as they come.
+        slam: take the poses as odometry and correct them with the walls (``--slam``).
         ros2_out: publish the map as ROS 2 markers and a path (``services.mapper.ros2_out``).
+        map: how the map associates, merges and serves walls.
+        poses: how long poses are kept and how far they are interpolated.
     """
 
     state: Path | None = None
@@ -70,27 +73,26 @@ class MapperSettings:
     pose_wait: float = 5.0
     gap_wait: float = 10.0
     save_every: float = 2.0
-    history: History = field(default_factory=History)
-    slam: SlamConfig | None = None
+    slam: SlamConfig = field(default_factory=SlamConfig)
     ros2_out: bool = True
     map: MapperConfig = field(default_factory=MapperConfig)
     poses: PoseBufferConfig = field(default_factory=PoseBufferConfig)
 
 
 class MapperCore:
-    """The map, the pose buffer and per-run counters behind one lock, shared by the workers."""
+    """The mapping, the pose buffer and per-run counters behind one lock, shared by the workers.
+
+    The mapping is the pipeline's stage (``services.pipeline.Mapping``): the map and, under
+    ``--slam``, the pose correction.
+    """
 
     def __init__(
-        self,
-        wall_map: WallMap,
-        poses: PoseBuffer,
-        stats: Stats,
-        runs: Iterable[Progress] = (),
-        corrector: PoseCorrector | None = None,
+        self, mapping: Mapping, poses: PoseBuffer, stats: Stats, runs: Iterable[Progress] = ()
     ) -> None:
-        self.map = wall_map
+        self.mapping = mapping
+        self.map = mapping.map
+        self.corrector = mapping.corrector  # --slam
         self.poses = poses
-        self.corrector = corrector  # --slam
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
@@ -152,8 +154,20 @@ class MapperCore:
             return self._replies[key]
 
 
-def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) -> Stats:
-    """Run until ``stop`` is set, then save the state; returns the counters."""
+def run(
+    settings: ZenohSettings,
+    mapper: MapperSettings,
+    stop: threading.Event,
+    history: History | None = None,
+    config: dict[str, Any] | None = None,
+) -> Stats:
+    """Run until ``stop`` is set, then save the state; returns the counters.
+
+    ``history``: the window of observations and poses asked for at start and recovered.
+    ``config``: the run's whole configuration (plain values), kept in the state file with the
+    map, so a map says how it was made.
+    """
+    history = history or History()
     log = setup_logging("mapper")
     keys = Keys(settings.prefix)
     stats = Stats(log)
@@ -164,7 +178,8 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
     corrector = _corrector(mapper)
     if corrector is not None:
         corrector.check(wall_map)
-    core = MapperCore(wall_map, PoseBuffer(mapper.poses), stats, runs, corrector)
+    core = MapperCore(Mapping(wall_map=wall_map, corrector=corrector), PoseBuffer(mapper.poses),
+                      stats, runs)  # fmt: skip
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
@@ -181,11 +196,11 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
             )
 
         poses = subscribe_with_history(
-            session, pose_key, mapper.history,
+            session, pose_key, history,
             lambda channel: _poses(channel, core, pose_input), missed("poses"),
         )  # fmt: skip
         observations = subscribe_with_history(
-            session, keys.observations, mapper.history,
+            session, keys.observations, history,
             lambda channel: _observations(
                 channel, core, progress, mapper.pose_wait, mapper.gap_wait, corrected
             ),
@@ -201,20 +216,20 @@ def run(settings: ZenohSettings, mapper: MapperSettings, stop: threading.Event) 
         token = Presence(session, keys, "mapper", stats)
         log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
         while not stop.wait(mapper.save_every):
-            _save(core, mapper.state)
+            _save(core, mapper.state, config)
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
         for entity in (poses, observations, queryable, *([ros2] if ros2 else [])):
             entity.undeclare()
         for worker in (poses, observations, *workers):
             worker.join(timeout=5.0)
-    _save(core, mapper.state)
+    _save(core, mapper.state, config)
     return stats
 
 
 def _corrector(mapper: MapperSettings) -> PoseCorrector | None:
     """The pose correction of ``--slam``, from the state file when it has one."""
-    if mapper.slam is None:
+    if not mapper.slam.enabled:
         return None
     saved = state_file.load_slam(mapper.state) if mapper.state else None
     if saved is None:
@@ -260,14 +275,14 @@ class _CorrectedPoses:
             )
 
 
-def _save(core: MapperCore, path: Path | None) -> None:
+def _save(core: MapperCore, path: Path | None, config: dict[str, Any] | None) -> None:
     if path is None:
         return
     with core.lock:
         if not core.dirty:
             return
         slam = core.corrector.to_json() if core.corrector is not None else None
-        document = state_file.to_json(core.map, core.runs.values(), slam)
+        document = state_file.to_json(core.map, core.runs.values(), slam, config)
         core.dirty = False
     state_file.write(path, document)
 
@@ -419,12 +434,10 @@ class _Waiting:
             self.pending.popleft()
             integrated = not isinstance(pose, Lookup)
             if integrated:
+                odom_frame = pose.frame
+                pose = core.mapping.integrate(obs, pose)
                 if core.corrector is not None and self.corrected is not None:
-                    odom_frame = pose.frame
-                    pose = core.corrector.integrate(obs, pose, core.map)
                     self.corrected.publish(core.corrector, pose, odom_frame)
-                else:
-                    core.map.integrate(obs, pose)
                 core.dirty = True
             self._done(obs, integrated=integrated)
         if integrated:

@@ -28,15 +28,21 @@ class StateError(RuntimeError):
 
 
 def to_json(
-    wall_map: WallMap, runs: Iterable[Progress] = (), slam: dict[str, Any] | None = None
+    wall_map: WallMap,
+    runs: Iterable[Progress] = (),
+    slam: dict[str, Any] | None = None,
+    config: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything needed to carry on where the map stopped.
 
     ``runs`` are the players' runs as far as this map has taken them: a mapper restarted on the
     file acknowledges them from there, and the players send it the rest again. ``slam``: the
-    pose correction's state (``PoseCorrector.to_json``) under ``--slam``.
+    pose correction's state (``PoseCorrector.to_json``) under ``--slam``. ``config``: the
+    configuration the map was made with (plain values, as ``wallmap config`` prints it); kept
+    for people and scripts, not read back.
     """
     return {
+        "config": config,
         "slam": slam,
         "v": STATE_VERSION,
         "runs": [[r.run, r.processed, r.integrated, r.dropped] for r in runs],

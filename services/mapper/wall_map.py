@@ -10,14 +10,15 @@ same wall.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common import ekf, wall_model
+from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.wall_index import WallIndex
@@ -35,10 +36,6 @@ CROSSING_REACH = 0.2  # m it must reach past the line on both sides: a T only me
 SEEN_THROUGH = 0.5  # a wall seen through along this share of its length is none
 
 
-def _default_pose_cov() -> Array:
-    return np.diag([0.02**2, 0.02**2, np.radians(0.5) ** 2])
-
-
 @dataclass(frozen=True)
 class MapperConfig:
     """Everything that tunes the map.
@@ -47,8 +44,9 @@ class MapperConfig:
         gate: chi-square gate on the squared Mahalanobis distance of the innovation.
         max_extent_gap: an observed segment farther than this along the wall from the wall's
             extent is another wall on the same line (m).
-        pose_cov: x/y/yaw covariance assumed for poses that carry none: no pose source is exact,
-            and without it a wall seen a hundred times would refuse the next good observation.
+        pose_sd: x, y (m) and yaw (rad) standard deviations assumed for poses that carry no
+            covariance: no pose source is exact, and without it a wall seen a hundred times
+            would refuse the next good observation.
         merge_angle: two walls whose lines differ by less than this angle (rad)...
         merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
             they merge, and the older id survives. 3 degrees and 10 cm is also the rule by which
@@ -94,7 +92,7 @@ class MapperConfig:
 
     gate: float = ekf.CHI2_2DOF_999
     max_extent_gap: float = 1.0
-    pose_cov: Array = field(default_factory=_default_pose_cov)
+    pose_sd: tuple[float, float, float] = (0.02, 0.02, math.radians(0.5))
     merge_angle: float = np.radians(3.0)
     merge_offset: float = 0.10
     corner_reach: float = 0.4
@@ -117,63 +115,10 @@ class MapperConfig:
     keyframe_distance: float = 0.1
     keyframe_angle: float = np.radians(5.0)
 
-
-@dataclass(frozen=True)
-class MapQuery:
-    """Which walls a reply holds: the selector parameters of ``{prefix}/map/walls``.
-
-    Attributes:
-        min_obs: walls seen at least this many times.
-        tentative: also walls not yet confirmed (possible phantoms).
-        bbox: (xmin, ymin, xmax, ymax): walls whose extent crosses this box.
-        since: walls seen at or after this stamp.
-        trajectory: add the keyframe trajectory.
-    """
-
-    min_obs: int = 1
-    tentative: bool = False
-    bbox: tuple[float, float, float, float] | None = None
-    since: float | None = None
-    trajectory: bool = False
-
-    @classmethod
-    def from_parameters(cls, params: Mapping[str, str]) -> MapQuery:
-        """Parse selector parameters; ValueError says which one is wrong and why."""
-        unknown = set(params) - {"min_obs", "tentative", "bbox", "since", "trajectory", "format"}
-        if unknown:
-            msg = f"unknown parameter {sorted(unknown)[0]!r}"
-            raise ValueError(msg)
-        try:
-            min_obs = int(params.get("min_obs") or 1)
-        except ValueError:
-            msg = f"min_obs must be an integer, got {params.get('min_obs')!r}"
-            raise ValueError(msg) from None
-        bbox = None
-        if params.get("bbox"):
-            try:
-                xmin, ymin, xmax, ymax = (float(v) for v in params["bbox"].split(","))
-            except ValueError:
-                msg = f"bbox must be xmin,ymin,xmax,ymax in metres, got {params['bbox']!r}"
-                raise ValueError(msg) from None
-            if not (xmin <= xmax and ymin <= ymax):
-                msg = f"bbox must have xmin <= xmax and ymin <= ymax, got {params['bbox']!r}"
-                raise ValueError(msg)
-            bbox = (xmin, ymin, xmax, ymax)
-        since = None
-        if params.get("since"):
-            try:
-                since = float(params["since"])
-            except ValueError:
-                msg = f"since must be a stamp in seconds, got {params['since']!r}"
-                raise ValueError(msg) from None
-        flags = {}
-        for name in ("tentative", "trajectory"):
-            value = params.get(name, "false")
-            if value not in ("true", "false"):
-                msg = f"{name} must be true or false, got {value!r}"
-                raise ValueError(msg)
-            flags[name] = value == "true"
-        return cls(min_obs, flags["tentative"], bbox, since, flags["trajectory"])
+    @property
+    def pose_cov(self) -> Array:
+        """The covariance of ``pose_sd``."""
+        return np.diag(np.square(self.pose_sd))
 
 
 def _segment_in_map(obs: WallObservation, pose: Array) -> Array:

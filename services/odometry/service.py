@@ -18,11 +18,11 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.codec import MessageError
 from wallmap.common.history import History, declare_history_publisher
+from wallmap.common.map_query import QueryError, fetch_map
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, received_frames, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.map_client import QueryError, fetch_map
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
 QUEUE_DEPTH = 8

@@ -43,15 +43,15 @@ PROGRESS_PERIOD = 0.2  # s between progress messages
 
 @dataclass(frozen=True)
 class PlayerSettings:
-    """How to play a bag.
+    """How to play a recording (which one is the command's argument, not configuration).
 
     Attributes:
-        bag: a ROS 1 ``.bag`` file, a ROS 2 bag folder or a TUM RGB-D folder.
         rate: speed factor on the recorded timing (ignored with ``fast``).
         fast: as fast as the pipeline takes it, with no frame lost.
         source: how to read it: pose source, sensor topic, levelling, a TUM folder's camera.
         window: frames in flight with ``fast``.
-        wait_for: services whose liveliness to wait for before playing.
+        wait_for: services whose liveliness to wait for before playing (not set: the detector
+            and the mapper with ``fast``, none in real time).
         wait_timeout: how long to wait for them (s).
         stall_timeout: with ``fast``, how long without an acknowledgement is a failure (s).
         whole_clouds: send whole clouds instead of only the row the detector asks for.
@@ -59,15 +59,13 @@ class PlayerSettings:
         duration: play this many seconds of the bag (None: to the end).
         loop: start over at the end, until stopped.
         paused: start paused (step or resume through the controls).
-        history: the window of frames and poses kept for services that missed them.
     """
 
-    bag: Path
     rate: float = 1.0
     fast: bool = False
     source: SourceOptions = field(default_factory=SourceOptions)
     window: int = 16
-    wait_for: tuple[str, ...] = ()
+    wait_for: tuple[str, ...] | None = None
     wait_timeout: float = 30.0
     stall_timeout: float = 30.0
     whole_clouds: bool = False
@@ -75,7 +73,13 @@ class PlayerSettings:
     duration: float | None = None
     loop: bool = False
     paused: bool = False
-    history: History = field(default_factory=History)
+
+    @property
+    def services(self) -> tuple[str, ...]:
+        """The services to wait for, ``wait_for`` or its default."""
+        if self.wait_for is not None:
+            return self.wait_for
+        return ("detector", "mapper") if self.fast else ()
 
 
 @dataclass(frozen=True)
@@ -318,18 +322,28 @@ def _play_pass(
     return None
 
 
-def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) -> PlayResult:
-    """Play the bag once (or in a loop); raises PlayerError (or TransportError) with a reason."""
+def run(
+    settings: ZenohSettings,
+    recording: Path,
+    player: PlayerSettings,
+    stop: threading.Event,
+    history: History | None = None,
+) -> PlayResult:
+    """Play ``recording`` once (or in a loop); raises PlayerError (or TransportError) saying why.
+
+    ``history``: the window of frames and poses kept for services that missed them.
+    """
+    history = history or History()
     log = setup_logging("player")
     keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
-    with open_source(player.bag, player.source) as bag:
+    with open_source(recording, player.source) as bag:
         for warning in bag.warnings:
             log.warning("%s", warning)
         log.info(
             "%s: %d frames on %s (%s), poses from %s",
-            player.bag,
+            recording,
             bag.frame_count,
             bag.sensor_topic,
             bag.sensor_type,
@@ -340,16 +354,14 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
         with open_session(settings) as session:
             acks = _Acks(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
-            _wait_for_services(session, keys, player.wait_for, player.wait_timeout, stop)
+            _wait_for_services(session, keys, player.services, player.wait_timeout, stop)
             sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
             rows = None if player.whole_clouds or sensor == "scan" else _ask_rows(session, keys)
             log.info(
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )
             playback = Playback(player.rate, fast=player.fast, paused=player.paused)
-            outlet = _Outlet(
-                session, keys, run_id, sensor, playback, bag, player.history, player.rate
-            )
+            outlet = _Outlet(session, keys, run_id, sensor, playback, bag, history, player.rate)
             control = session.declare_queryable(keys.player_control, zenoh.handlers.FifoChannel(16))
             threading.Thread(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
@@ -370,11 +382,11 @@ def run(settings: ZenohSettings, player: PlayerSettings, stop: threading.Event) 
                     else:
                         break
             outlet.bar.update(outlet.published, force=True)
-            if "mapper" in player.wait_for and not player.fast:
+            if "mapper" in player.services and not player.fast:
                 acks.wait_until(outlet.published, player.stall_timeout, stop)
             seconds = time.monotonic() - start_wall
             outlet.finish()
             control.undeclare()
             progress_sub.undeclare()
-    waited = player.fast or "mapper" in player.wait_for
+    waited = player.fast or "mapper" in player.services
     return PlayResult(outlet.published, outlet.poses, seconds, acks.integrated if waited else None)

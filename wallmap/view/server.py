@@ -18,6 +18,7 @@ import socket
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -26,21 +27,19 @@ from urllib.parse import parse_qs, urlsplit
 
 import zenoh
 
-from wallmap.arg_types import port
 from wallmap.common.codec import MessageError, decode
+from wallmap.common.map_query import QueryError, fetch_map
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import (
     Keys,
-    add_zenoh_arguments,
     open_session,
-    settings_from_args,
 )
-from wallmap.map_client import QueryError, fetch_map
+from wallmap.config import Config
+from wallmap.options import VIEW, ZENOH
+from wallmap.options import add_command as add_options_command
 from wallmap.view.live import LiveMap
 
-DEFAULT_PORT = 8765
-DEFAULT_HOST = "127.0.0.1"
 REQUERY_PERIOD = 2.0  # s between whole-map queries (the trajectory is not in the updates)
 QUERY_TIMEOUT = 5.0  # s
 ROUTER_WAIT = 3.0  # s to reach the router at start, then fail in one line
@@ -208,15 +207,15 @@ class Feed:
             self._stop.wait(REQUERY_PERIOD)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(_: argparse.Namespace, config: Config) -> int:
     """Serve the page until SIGINT or SIGTERM; the ``func`` of ``wallmap view``."""
     log = setup_logging("view")
     stop = stop_on_signals()
-    settings = settings_from_args(args, wait_for_router=ROUTER_WAIT)
+    settings = replace(config.zenoh, wait_for_router=ROUTER_WAIT)
     live = LiveMap()
     # The port first: a port in use fails at once, without waiting for the router.
     with (
-        ViewServer(args.host, args.port, live, load_static()) as httpd,
+        ViewServer(config.view.host, config.view.port, live, load_static()) as httpd,
         open_session(settings) as session,
     ):
         feed = Feed(session, Keys(settings.prefix), live, Stats(log))
@@ -230,14 +229,6 @@ def run(args: argparse.Namespace) -> int:
 
 def add_command(sub: Any) -> None:
     """Add ``view`` to the ``wallmap`` command's subparsers (``sub`` from add_subparsers)."""
-    p = sub.add_parser("view", help="a live map page on localhost (pan, zoom, hover a wall)")
-    p.add_argument(
-        "--port", type=port, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT})"
+    add_options_command(
+        sub, "view", "a live map page on localhost (pan, zoom, hover a wall)", run, VIEW, ZENOH
     )
-    p.add_argument(
-        "--host",
-        default=DEFAULT_HOST,
-        help=f"address to serve on (default {DEFAULT_HOST}: this machine only)",
-    )
-    add_zenoh_arguments(p)
-    p.set_defaults(func=run)

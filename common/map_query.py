@@ -1,0 +1,122 @@
+"""Both ends of ``{prefix}/map/walls``: which walls a query asks for, and asking.
+
+A query's selector parameters (``min_obs``, ``tentative``, ``bbox``, ``since``, ``trajectory``,
+``format``) are parsed and checked here for the mapper (``MapQuery.from_parameters``), and
+written here for clients (``MapQuery.to_selector``, ``fetch_map``), so the two cannot drift
+apart. A wrong parameter is refused with a reply that says which one and why.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from wallmap.common.codec import MessageError, decode
+from wallmap.common.transport import Keys
+
+
+@dataclass(frozen=True)
+class MapQuery:
+    """Which walls a reply holds: the selector parameters of ``{prefix}/map/walls``.
+
+    Attributes:
+        min_obs: walls seen at least this many times.
+        tentative: also walls not yet confirmed (possible phantoms).
+        bbox: (xmin, ymin, xmax, ymax): walls whose extent crosses this box.
+        since: walls seen at or after this stamp.
+        trajectory: add the keyframe trajectory.
+    """
+
+    min_obs: int = 1
+    tentative: bool = False
+    bbox: tuple[float, float, float, float] | None = None
+    since: float | None = None
+    trajectory: bool = False
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, str]) -> MapQuery:
+        """Parse selector parameters; ValueError says which one is wrong and why."""
+        unknown = set(params) - {"min_obs", "tentative", "bbox", "since", "trajectory", "format"}
+        if unknown:
+            msg = f"unknown parameter {sorted(unknown)[0]!r}"
+            raise ValueError(msg)
+        try:
+            min_obs = int(params.get("min_obs") or 1)
+        except ValueError:
+            msg = f"min_obs must be an integer, got {params.get('min_obs')!r}"
+            raise ValueError(msg) from None
+        bbox = None
+        if params.get("bbox"):
+            try:
+                xmin, ymin, xmax, ymax = (float(v) for v in params["bbox"].split(","))
+            except ValueError:
+                msg = f"bbox must be xmin,ymin,xmax,ymax in metres, got {params['bbox']!r}"
+                raise ValueError(msg) from None
+            if not (xmin <= xmax and ymin <= ymax):
+                msg = f"bbox must have xmin <= xmax and ymin <= ymax, got {params['bbox']!r}"
+                raise ValueError(msg)
+            bbox = (xmin, ymin, xmax, ymax)
+        since = None
+        if params.get("since"):
+            try:
+                since = float(params["since"])
+            except ValueError:
+                msg = f"since must be a stamp in seconds, got {params['since']!r}"
+                raise ValueError(msg) from None
+        flags = {}
+        for name in ("tentative", "trajectory"):
+            value = params.get(name, "false")
+            if value not in ("true", "false"):
+                msg = f"{name} must be true or false, got {value!r}"
+                raise ValueError(msg)
+            flags[name] = value == "true"
+        return cls(min_obs, flags["tentative"], bbox, since, flags["trajectory"])
+
+    def to_parameters(self) -> dict[str, str]:
+        """The selector parameters that ask for this selection (defaults left out)."""
+        params: dict[str, str] = {}
+        if self.min_obs != 1:
+            params["min_obs"] = str(self.min_obs)
+        if self.tentative:
+            params["tentative"] = "true"
+        if self.bbox is not None:
+            params["bbox"] = ",".join(repr(v) for v in self.bbox)
+        if self.since is not None:
+            params["since"] = repr(self.since)
+        if self.trajectory:
+            params["trajectory"] = "true"
+        return params
+
+
+class QueryError(RuntimeError):
+    """No usable map came back; the message says why, in one line."""
+
+
+def fetch_map(
+    session: zenoh.Session, keys: Keys, *, timeout: float = 5.0, **parameters: object
+) -> dict[str, Any]:
+    """Query ``{prefix}/map/walls`` with selector parameters and return the decoded reply.
+
+    Parameters are the mapper's (``min_obs``, ``tentative``, ``bbox``, ``since``,
+    ``trajectory``); None leaves one out, booleans become true/false.
+    """
+    pairs = [
+        f"{name}={str(value).lower() if isinstance(value, bool) else value}"
+        for name, value in parameters.items()
+        if value is not None
+    ]
+    selector = keys.map_walls + ("?" + ";".join(pairs) if pairs else "")
+    for reply in session.get(selector, timeout=timeout):
+        if reply.ok is None:
+            msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
+            raise QueryError(msg)
+        try:
+            return decode(reply.ok.payload.to_bytes())
+        except MessageError as err:
+            msg = f"the map reply is unreadable: {err}"
+            raise QueryError(msg) from err
+    msg = f"no mapper answered on {keys.map_walls} within {timeout:.0f} s"
+    raise QueryError(msg)
