@@ -21,10 +21,10 @@ import numpy as np
 from mapper_scaling import build
 
 from wallmap.common.codec import decode, encode
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import QueryError, fetch_map
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.launcher import free_loopback_port
-from wallmap.services.mapper import state_file
+from wallmap.services.mapper import serving, state_file
 
 
 def wait_for_map(settings: ZenohSettings, walls: int) -> None:
@@ -32,7 +32,7 @@ def wait_for_map(settings: ZenohSettings, walls: int) -> None:
     with open_session(settings) as session:
         while time.monotonic() < deadline:
             try:
-                if len(fetch_map(session, Keys(), timeout=2.0)["walls"]) >= walls:
+                if len(fetch_map(session, Keys(), timeout=2.0).walls) >= walls:
                     return
             except QueryError:  # the mapper is not up yet
                 time.sleep(0.2)
@@ -90,7 +90,7 @@ def main() -> None:
                 proc.wait()
     begin = time.perf_counter()
     for _ in range(20):
-        payload = encode(wall_map.reply(MapQuery()))
+        payload = encode(serving.reply(wall_map).to_map())
     rebuild_ms = (time.perf_counter() - begin) / 20 * 1e3
     begin = time.perf_counter()
     for _ in range(20):

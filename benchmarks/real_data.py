@@ -41,6 +41,7 @@ from wallmap.common.scene import load_truth, write_scene_bag
 from wallmap.config import configured
 from wallmap.offline import map_bag, scan_rows
 from wallmap.plot import write_picture
+from wallmap.services.mapper import serving
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 
@@ -66,8 +67,8 @@ def real_bags(out: Path | None) -> None:
             config = configured("up.odometry=true", f"odometry.use_walls={str(use_walls).lower()}")
             wall_map = map_bag(bag, config, poses=poses)
             per_scan = (time.perf_counter() - start) / max(n_scans, 1) * 1e3
-            reply = wall_map.reply(MapQuery(trajectory=True))
-            walls = [MappedWall.from_reply(w) for w in reply["walls"]]
+            reply = serving.reply(wall_map, MapQuery(trajectory=True))
+            walls = [MappedWall.from_reply(w) for w in reply.walls]
             placed = {p.stamp: (p.x, p.y, p.yaw) for p in poses}
             distance = np.concatenate(
                 [distance_to_walls(place_scan(xy, placed[t]), walls) for t, xy in scan_rows(bag)]
@@ -103,7 +104,7 @@ def drift(seeds: list[int], frames: int) -> None:
             ):
                 poses: list[Pose] = []
                 wall_map = map_bag(bag, configured(*settings), poses=poses)
-                score = evaluate_map(wall_map.reply(MapQuery())["walls"], plan, seen)
+                score = evaluate_map(serving.reply(wall_map).walls, plan, seen)
                 index = [int(np.argmin(np.abs(trajectory.stamps - p.stamp))) for p in poses]
                 error = statistics.median(
                     math.hypot(p.x - trajectory.x[i], p.y - trajectory.y[i])

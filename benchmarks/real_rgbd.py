@@ -29,6 +29,7 @@ from wallmap.config import Config
 from wallmap.offline import map_bag, points_at_heights, walls
 from wallmap.plot import write_picture
 from wallmap.recordings import RGBD, tum_as_bag
+from wallmap.services.mapper import serving
 from wallmap.services.player.service import PlayerSettings
 from wallmap.services.player.sources import SourceOptions
 
@@ -48,7 +49,7 @@ def row(name: str, way: str, recording: Path, options: SourceOptions, out: Path 
         f"{len(duplicates(mapped)):>5} {100 * on_walls:>8.0f} % {1e3 * seconds / frames:>8.1f}"
     )
     if out is not None:
-        reply = wall_map.reply(MapQuery(min_obs=3, trajectory=True))
+        reply = serving.reply(wall_map, MapQuery(min_obs=3, trajectory=True))
         write_picture(out / f"real-{name}-{way}.png", reply, points=seen, size=800)
 
 

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.common.map_records import WallRecord
 from wallmap.common.scene.floorplan import FloorPlan, Wall
 
 _EPS = 1e-9
@@ -188,7 +189,7 @@ def _one_line(a: Wall, b: Wall) -> bool:
 
 
 def evaluate_map(
-    mapped: Sequence[Mapping[str, Any]],
+    mapped: Sequence[WallRecord | Mapping[str, Any]],
     plan: FloorPlan,
     seen_counts: Mapping[int, int],
     *,
@@ -199,7 +200,8 @@ def evaluate_map(
     """Score a wall map against the plan it was built from (rules in the module docstring).
 
     Args:
-        mapped: Mapped walls, dicts with ``u, v, p0, p1`` (and optionally ``id``).
+        mapped: Mapped walls: records of a map reply, or dicts with ``u, v, p0, p1`` (and
+            optionally ``id`` and ``segments``), from any mapper.
         plan: Ground truth.
         seen_counts: Per true wall id, the frames in which the detector could see it.
         min_frames: True walls seen in fewer frames are not required for recall.
@@ -209,6 +211,7 @@ def evaluate_map(
     Returns:
         The score.
     """
+    mapped = [w.to_map() if isinstance(w, WallRecord) else w for w in mapped]
     groups = physical_walls(plan)
     # Best (smallest offset) match per physical wall as (angle, offset, end-point error), and
     # how many mapped walls match it (a mapped wall matching two of its pieces counts once).

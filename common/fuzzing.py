@@ -20,6 +20,7 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from wallmap.common.codec import MessageError, decode
+from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
 from wallmap.common.messages import (
     Frame,
     Observations,
@@ -112,10 +113,13 @@ def samples() -> dict[str, tuple[bytes, Decoder]]:
     ends = np.array([2.0, -1.0]), np.array([2.0, 1.0])
     wall = WallObservation(np.array([2.0, 0.1]), cov, *ends, 40, 0.01)
     points = np.random.default_rng(0).normal(size=(2, 8, 3)).astype(np.float32)
-    update = {
-        "v": 1, "frames": 3, "stamp": 1.0, "removed": [4],
-        "walls": [{"id": 1, "n_obs": 9, "segments": [[[0, 0], [4, 0]]], "tentative": False}],
-    }  # fmt: skip
+    record = WallRecord(1, 0.0, 2.0, ((1e-4, 0.0), (0.0, 1e-4)), (0.0, 2.0), (4.0, 2.0),
+                        (((0.0, 2.0), (4.0, 2.0)),), 9, 3, False, 0.5, 1.0)  # fmt: skip
+    update = {"v": 1, **MapUpdate(3, 1.0, (record,), (4,)).to_map()}
+    reply = {
+        "v": 1,
+        **MapReply(frames=3, walls=(record,), trajectory=((1.0, 0.0, 0.0, 0.1),)).to_map(),
+    }
     out = {
         "pose": (pack(Pose(1.0, 1.0, 2.0, 0.3, np.eye(3) * 0.01)), unpack_pose),
         "frame": (pack(Frame("r", 3, 1.0, "cam", points, np.eye(4))), unpack_frame),
@@ -128,10 +132,8 @@ def samples() -> dict[str, tuple[bytes, Decoder]]:
             msgpack.packb({"v": 1, **RowSelection().to_map()}),
             lambda b: RowSelection.from_map(decode(b)),
         ),
-        "map update (odometry)": (
-            msgpack.packb(update),
-            tracker.take_update,
-        ),
+        "map update (odometry)": (msgpack.packb(update), tracker.take_update),
+        "map reply": (msgpack.packb(reply), lambda b: MapReply.from_map(decode(b))),
     }
     out.update(_cdr_samples())
     return out

@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common.map_records import WallRecord, as_records
+
 Array = NDArray[np.float64]
 
 
@@ -28,9 +30,10 @@ class MappedWall:
     segments: Array
 
     @classmethod
-    def from_reply(cls, record: Mapping[str, Any]) -> MappedWall:
-        """From one wall of the contract's reply."""
-        return cls(int(record["id"]), np.asarray(record["segments"], dtype=float).reshape(-1, 2, 2))
+    def from_reply(cls, record: WallRecord | Mapping[str, Any]) -> MappedWall:
+        """From one wall of a map reply (typed, or the contract's JSON)."""
+        (wall,) = as_records([record])
+        return cls(wall.id, np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2))
 
     @property
     def length(self) -> float:

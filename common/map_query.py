@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
+from wallmap.common.map_records import MapReply
 from wallmap.common.transport import Keys
 
 
@@ -95,28 +95,30 @@ class QueryError(RuntimeError):
     """No usable map came back; the message says why, in one line."""
 
 
-def fetch_map(
-    session: zenoh.Session, keys: Keys, *, timeout: float = 5.0, **parameters: object
-) -> dict[str, Any]:
-    """Query ``{prefix}/map/walls`` with selector parameters and return the decoded reply.
+class MalformedReplyError(QueryError):
+    """A mapper answered with a reply that does not decode: refused, and counted by callers."""
 
-    Parameters are the mapper's (``min_obs``, ``tentative``, ``bbox``, ``since``,
-    ``trajectory``); None leaves one out, booleans become true/false.
+
+def fetch_map(
+    session: zenoh.Session, keys: Keys, query: MapQuery | None = None, *, timeout: float = 5.0
+) -> MapReply:
+    """Ask ``{prefix}/map/walls`` for the walls ``query`` selects; the reply, checked.
+
+    Raises:
+        QueryError: no mapper answered, it refused the query, or its reply is unreadable.
     """
-    pairs = [
-        f"{name}={str(value).lower() if isinstance(value, bool) else value}"
-        for name, value in parameters.items()
-        if value is not None
-    ]
-    selector = keys.map_walls + ("?" + ";".join(pairs) if pairs else "")
+    params = (query or MapQuery()).to_parameters()
+    selector = keys.map_walls + (
+        "?" + ";".join(f"{k}={v}" for k, v in params.items()) if params else ""
+    )
     for reply in session.get(selector, timeout=timeout):
         if reply.ok is None:
             msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
             raise QueryError(msg)
         try:
-            return decode(reply.ok.payload.to_bytes())
+            return MapReply.from_map(decode(reply.ok.payload.to_bytes()))
         except MessageError as err:
             msg = f"the map reply is unreadable: {err}"
-            raise QueryError(msg) from err
+            raise MalformedReplyError(msg) from err
     msg = f"no mapper answered on {keys.map_walls} within {timeout:.0f} s"
     raise QueryError(msg)

@@ -12,7 +12,7 @@ many viewpoints it was seen, and whether it is still tentative.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -124,7 +124,7 @@ class WallRecord:
                 cov=_matrix2(m["cov"]),
                 p0=p0,
                 p1=p1,
-                segments=_segments(m.get("segments") or [[p0, p1]]),
+                segments=_segments(_with_default(m.get("segments"), [[p0, p1]])),
                 n_obs=_integer(m["n_obs"], "n_obs"),
                 n_views=_integer(m.get("n_views", 0), "n_views"),
                 tentative=m.get("tentative", False),
@@ -136,6 +136,11 @@ class WallRecord:
         if not isinstance(record.tentative, bool):
             raise MessageError("field 'tentative' must be true or false")
         return record
+
+
+def _with_default(value: Any, default: Any) -> Any:
+    """``value``, or ``default`` when it is missing or an empty list (not any falsy thing)."""
+    return default if value is None or (isinstance(value, list) and not value) else value
 
 
 def _matrix2(value: Any) -> tuple[Point, Point]:
@@ -271,3 +276,12 @@ class MapUpdate:
             )
         except KeyError as err:
             raise MessageError(f"the map update lacks {err}") from None
+
+
+def as_records(walls: Iterable[WallRecord | Mapping[str, Any]]) -> list[WallRecord]:
+    """Wall records, typed, from typed ones or from the contract's JSON (a file, a script).
+
+    Raises:
+        MessageError: a record that is not one.
+    """
+    return [w if isinstance(w, WallRecord) else WallRecord.from_map(w) for w in walls]

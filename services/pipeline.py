@@ -15,15 +15,17 @@ make. Pure: no Zenoh, no files.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from wallmap.common.map_records import MapUpdate
 from wallmap.common.messages import Frame, Observations, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
+from wallmap.services.mapper import serving
+from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
 
@@ -54,9 +56,9 @@ class Mapping:
         self.map.integrate(observations, pose)
         return pose
 
-    def changes(self) -> dict[str, Any]:
+    def changes(self) -> MapUpdate:
         """The walls changed and the ids removed since the last call (a map update)."""
-        return self.map.take_changes()
+        return serving.take_changes(self.map)
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ class Pipeline:
         used = self.mapping.integrate(observations, pose)
         if self.tracker is not None and self.tracker.config.use_walls:
             changes = self.mapping.changes()
-            self.tracker.set_walls(changes["walls"], changes["removed"])
+            self.tracker.set_walls(changes.walls, changes.removed)
         return Step(observations, used)
 
     def _track(self, frame: Frame) -> Pose:

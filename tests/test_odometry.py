@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import math
 
+import msgpack
 import numpy as np
 import pytest
 
 from wallmap.common.codec import MessageError
 from wallmap.common.evaluation import MapScore, evaluate_map
+from wallmap.common.map_records import WallRecord
 from wallmap.common.scene import load_truth, write_scene_bag
 from wallmap.config import configured
 from wallmap.offline import map_bag, walls
@@ -61,15 +63,24 @@ def test_wall_refined_scan_matching_beats_wheel_odometry(scene) -> None:
     assert refined_error <= icp_error + 0.002  # the walls do not make it worse
 
 
+def _record(wall_id: int, n_obs: int, segments, *, tentative: bool = False) -> WallRecord:
+    cov = ((1e-4, 0.0), (0.0, 1e-4))
+    p0, p1 = segments[0][0], segments[-1][1]
+    return WallRecord(wall_id, 0.0, 0.0, cov, p0, p1, segments, n_obs, 3, tentative, 0.0, 1.0)
+
+
 def test_tracker_takes_settled_walls_and_refuses_malformed_ones() -> None:
     tracker = PoseTracker(OdometryConfig(wall_min_obs=5))
-    good = {"id": 1, "n_obs": 9, "segments": [[[0, 0], [4, 0]], [[5, 0], [8, 0]]]}
-    young = {"id": 2, "n_obs": 2, "segments": [[[0, 1], [4, 1]]]}
-    tentative = {**good, "id": 3, "tentative": True}
-    broken = {"id": 4, "n_obs": 9, "segments": [[0, 0], [float("nan"), 1]]}
-    with pytest.raises(MessageError, match="non-finite"):
-        tracker.set_walls([good, young, tentative, broken])
+    good = _record(1, 9, (((0.0, 0.0), (4.0, 0.0)), ((5.0, 0.0), (8.0, 0.0))))
+    young = _record(2, 2, (((0.0, 1.0), (4.0, 1.0)),))
+    tentative = _record(3, 9, good.segments, tentative=True)
+    tracker.set_walls([good, young, tentative])
     assert tracker.wall_count == 1
+    broken = {**good.to_map(), "id": 4, "segments": [[[0, 0], [float("nan"), 1]]]}
+    update = {"v": 1, "frames": 3, "stamp": 1.0, "walls": [broken], "removed": []}
+    with pytest.raises(MessageError, match="finite"):
+        tracker.take_update(msgpack.packb(update))
+    assert tracker.wall_count == 1, "a malformed update changes nothing"
     lines = wall_lines(good)
     assert len(lines) == 2
     np.testing.assert_allclose(abs(lines[0].normal), [0.0, 1.0])

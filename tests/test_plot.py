@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from wallmap import plot
+from wallmap.common.map_records import MapReply
 from wallmap.export import to_geojson, write_geojson
 
 SVG = "{http://www.w3.org/2000/svg}"
@@ -41,7 +42,7 @@ def make_reply(walls, trajectory=None):
     reply |= {"walls": walls, "merges": []}
     if trajectory is not None:
         reply["trajectory"] = trajectory
-    return reply
+    return MapReply.from_map(reply)
 
 
 ROOM = [
@@ -258,7 +259,10 @@ def test_geojson_round_trips_with_features_and_properties(tmp_path):
     walls = [f for f in collection["features"] if f["properties"]["kind"] == "wall"]
     assert [f["id"] for f in walls] == [0, 1, 2, 3]
     first = walls[0]
-    assert first["geometry"] == {"type": "LineString", "coordinates": [[-4.0, -3.0], [5.0, -3.0]]}
+    assert first["geometry"] == {
+        "type": "MultiLineString",
+        "coordinates": [[[-4.0, -3.0], [5.0, -3.0]]],
+    }, "a wall is the segments seen, one here"
     props = first["properties"]
     assert props["u"] == pytest.approx(0.0, abs=1e-12)
     assert props["v"] == pytest.approx(-3.0)

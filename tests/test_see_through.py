@@ -7,10 +7,15 @@ import numpy as np
 from wallmap.common import wall_model
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.services.mapper import state_file
+from wallmap.services.mapper import serving, state_file
 from wallmap.services.mapper.wall_map import WallMap
 
 NOISE = 0.01
+
+
+def reply(wall_map, query=None) -> dict:
+    """The map reply in the contract's plain form."""
+    return serving.reply(wall_map, query).to_map()
 
 
 def seen(wall: tuple[tuple[float, float], tuple[float, float]], pose: np.ndarray):
@@ -46,10 +51,10 @@ def test_a_line_the_sensor_saw_through_is_not_served_and_the_wall_behind_is() ->
             Observations("r", i, float(i), "base_link", walls, ray_origin=np.zeros(2), rays=rays),
             Pose(float(i), *pose),
         )
-    served = wall_map.reply(MapQuery())["walls"]
+    served = reply(wall_map, MapQuery())["walls"]
     assert len(served) == 1
     assert abs(served[0]["u"] - 4.0) < 0.05
-    everything = wall_map.reply(MapQuery(tentative=True))["walls"]
+    everything = reply(wall_map, MapQuery(tentative=True))["walls"]
     assert len(everything) == 2, "the phantom stays in the map, as tentative"
 
 
@@ -65,7 +70,7 @@ def test_a_door_seen_through_is_a_gap_in_its_wall() -> None:
             Observations("r", i, float(i), "base_link", walls, ray_origin=np.zeros(2), rays=rays),
             Pose(float(i), *pose),
         )
-    (record,) = wall_map.reply(MapQuery())["walls"]
+    (record,) = reply(wall_map, MapQuery())["walls"]
     segments = np.array(record["segments"])
     assert len(segments) == 2, segments
     lows, highs = segments[:, :, 1].min(axis=1), segments[:, :, 1].max(axis=1)
@@ -84,7 +89,7 @@ def test_rays_ending_on_a_wall_leave_it_whole_and_survive_the_state_file(tmp_pat
             ),
             Pose(float(i), *pose),
         )
-    (record,) = wall_map.reply(MapQuery())["walls"]
+    (record,) = reply(wall_map, MapQuery())["walls"]
     assert len(record["segments"]) == 1
     path = tmp_path / "map.json"
     state_file.write(path, state_file.to_json(wall_map))
@@ -103,6 +108,6 @@ def test_two_lines_for_one_surface_serve_one_wall() -> None:
         wall_map.integrate(
             Observations("r", i, float(i), "base_link", walls), Pose(float(i), *pose)
         )
-    assert len(wall_map.reply(MapQuery(tentative=True))["walls"]) == 2
-    (served,) = wall_map.reply(MapQuery())["walls"]
+    assert len(reply(wall_map, MapQuery(tentative=True))["walls"]) == 2
+    (served,) = reply(wall_map, MapQuery())["walls"]
     assert served["n_obs"] == 20, "the better seen line is the one served"

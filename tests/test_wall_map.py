@@ -8,9 +8,10 @@ import pytest
 from wallmap.common import wall_model
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.services.mapper import state_file
+from wallmap.services.mapper import serving, state_file
+from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import WallMap
 
 # A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
 WALLS = [
@@ -21,6 +22,11 @@ WALLS = [
     ((-4.0, 4.7), (-4.0, -3.0)),
     ((-2.0, -2.0), (2.0, 2.0)),  # a free-standing wall on the line y = x, through the origin
 ]
+
+
+def reply(wall_map, query=None) -> dict:
+    """The map reply in the contract's plain form."""
+    return serving.reply(wall_map, query).to_map()
 
 
 def observe(pose, rng, noise=0.01, max_range=6.0):
@@ -74,7 +80,7 @@ def line_error(wall_reply, p0, p1):
 def test_every_wall_is_mapped_once_and_accurately():
     rng = np.random.default_rng(5)
     wall_map = build_map(rng)
-    walls = wall_map.reply(MapQuery(min_obs=3))["walls"]
+    walls = reply(wall_map, MapQuery(min_obs=3))["walls"]
     # The two pieces either side of the doorway are one wall, its segments showing the door.
     assert len(walls) == len(WALLS) - 1, [w["n_obs"] for w in walls]
     for p0, p1 in WALLS:
@@ -93,7 +99,7 @@ def test_every_wall_is_mapped_once_and_accurately():
 def test_reported_closest_point_and_covariance_are_in_the_map_frame():
     rng = np.random.default_rng(6)
     wall_map = build_map(rng)
-    for w in wall_map.reply(MapQuery(min_obs=3))["walls"]:
+    for w in reply(wall_map, MapQuery(min_obs=3))["walls"]:
         p0, p1 = np.array(w["p0"]), np.array(w["p1"])
         d = (p1 - p0) / np.linalg.norm(p1 - p0)
         foot = p0 - (p0 @ d) * d  # the line's closest point to the origin
@@ -131,7 +137,7 @@ def test_collinear_walls_far_apart_stay_separate():
     )
     ids = wall_map.integrate(Observations("r", 1, 2.0, "base_link", [near]), Pose(2.0, 0, 0, 0))
     assert ids == [0]
-    wall = wall_map.reply(MapQuery(tentative=True))["walls"][0]  # seen once: tentative
+    wall = reply(wall_map, MapQuery(tentative=True))["walls"][0]  # seen once: tentative
     assert wall["tentative"]
     assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 0.0])
 
@@ -142,7 +148,7 @@ def test_state_round_trip_keeps_ids_and_numbers(tmp_path):
     path = tmp_path / "map.json"
     state_file.write(path, state_file.to_json(wall_map))
     again = state_file.load(path, MapperConfig())
-    assert again.reply(MapQuery(trajectory=True)) == wall_map.reply(MapQuery(trajectory=True))
+    assert reply(again, MapQuery(trajectory=True)) == reply(wall_map, MapQuery(trajectory=True))
     assert again.next_id == wall_map.next_id
     assert len(again.trajectory) > 20
 
@@ -197,15 +203,15 @@ def test_walls_that_converge_onto_one_line_merge_and_the_older_id_survives(tmp_p
     assert seen(-4.5, -1.0, 3.1) == [0]
     assert list(wall_map.walls) == [0]
     assert wall_map.merges == [(1, 0, 3.0)]
-    wall = wall_map.reply(MapQuery(tentative=True))["walls"][0]
+    wall = reply(wall_map, MapQuery(tentative=True))["walls"][0]
     assert sorted([wall["p0"][0], wall["p1"][0]]) == pytest.approx([-6.0, 2.0])
     assert wall["n_obs"] == 6
-    assert wall_map.reply()["merges"] == [[1, 0, 3.0]]
+    assert reply(wall_map)["merges"] == [[1, 0, 3.0]]
     path = tmp_path / "map.json"
     state_file.write(path, state_file.to_json(wall_map))
     again = state_file.load(path, MapperConfig())
     assert again.merges == [(1, 0, 3.0)]
-    assert again.reply(MapQuery(tentative=True)) == wall_map.reply(MapQuery(tentative=True))
+    assert reply(again, MapQuery(tentative=True)) == reply(wall_map, MapQuery(tentative=True))
 
 
 def test_two_faces_of_a_real_wall_stay_apart():
@@ -252,7 +258,7 @@ def test_a_door_splits_the_extent_into_segments_and_strays_do_not_stretch_it():
     wall_map.integrate(
         Observations("r", 9, 9.0, "base_link", [along_wall(2.5, 6.0)]), Pose(9, 0, 0, 0)
     )
-    (wall,) = wall_map.reply()["walls"]
+    (wall,) = reply(wall_map)["walls"]
     segments = np.array(wall["segments"])[:, :, 0]
     spans = sorted(np.sort(segments, axis=1).tolist())
     np.testing.assert_allclose(spans, [[-3.0, -0.5], [0.5, 3.0]], atol=0.05)
@@ -265,12 +271,12 @@ def test_walls_are_tentative_until_seen_from_distinct_viewpoints():
         wall_map.integrate(
             Observations("r", i, float(i), "base_link", [along_wall(-1, 1)]), Pose(i, 0, 0, 0)
         )
-    assert wall_map.reply()["walls"] == []
-    assert len(wall_map.reply(MapQuery(tentative=True))["walls"]) == 1
+    assert reply(wall_map)["walls"] == []
+    assert len(reply(wall_map, MapQuery(tentative=True))["walls"]) == 1
     wall_map.integrate(
         Observations("r", 5, 5.0, "base_link", [along_wall(-1.5, 0.5)]), Pose(5, 0.5, 0, 0)
     )
-    (wall,) = wall_map.reply()["walls"]
+    (wall,) = reply(wall_map)["walls"]
     assert (wall["n_views"], wall["tentative"]) == (2, False)
 
 
@@ -281,11 +287,11 @@ def test_query_filters_and_their_errors():
         wall_map.integrate(
             Observations("r", i, 10.0 + i, "base_link", obs), Pose(10.0 + i, 0.3 * i, 0, 0)
         )
-    assert len(wall_map.reply()["walls"]) == 2
+    assert len(reply(wall_map)["walls"]) == 2
     box = MapQuery.from_parameters({"bbox": "-2,1,2,3"})
-    assert [w["v"] for w in wall_map.reply(box)["walls"]] == [pytest.approx(2.0)]
-    assert wall_map.reply(MapQuery.from_parameters({"since": "13.5"}))["walls"] == []
-    assert len(wall_map.reply(MapQuery.from_parameters({"since": "13"}))["walls"]) == 2
+    assert [w["v"] for w in reply(wall_map, box)["walls"]] == [pytest.approx(2.0)]
+    assert reply(wall_map, MapQuery.from_parameters({"since": "13.5"}))["walls"] == []
+    assert len(reply(wall_map, MapQuery.from_parameters({"since": "13"}))["walls"]) == 2
     for params, reason in [
         ({"bbox": "1,2,3"}, "bbox must be"),
         ({"bbox": "3,0,1,1"}, "xmin <= xmax"),
@@ -295,9 +301,9 @@ def test_query_filters_and_their_errors():
     ]:
         with pytest.raises(ValueError, match=reason):
             MapQuery.from_parameters(params)
-    changes = wall_map.take_changes()
+    changes = serving.take_changes(wall_map).to_map()
     assert len(changes["walls"]) == 2
-    assert wall_map.take_changes()["walls"] == []
+    assert serving.take_changes(wall_map).to_map()["walls"] == []
 
 
 def test_a_wall_passing_close_to_the_sensor_is_mapped_as_well_as_any_other():
@@ -314,7 +320,7 @@ def test_a_wall_passing_close_to_the_sensor_is_mapped_as_well_as_any_other():
         wall_map.integrate(
             Observations("r", i, float(i), "base_link", [obs]), Pose(float(i), *pose)
         )
-    (wall,) = wall_map.reply()["walls"]
+    (wall,) = reply(wall_map)["walls"]
     assert wall["u"] == pytest.approx(0.0, abs=0.005)
     assert wall["v"] == pytest.approx(0.35, abs=0.005)
     assert line_error(wall, (-1.0, 0.35), (5.0, 0.35)) < 0.01
@@ -338,10 +344,10 @@ def test_a_line_blended_across_a_shallow_corner_is_a_shadow_not_a_wall():
         wall_map.integrate(
             Observations("r", 20 + i, 20.0 + i, "base_link", [obs]), Pose(20.0 + i, 0.3 * i, 0, 0)
         )
-    served = wall_map.reply()["walls"]
+    served = reply(wall_map)["walls"]
     assert len(wall_map.walls) == 2
     assert [w["id"] for w in served] == [0]
-    shadow = [w for w in wall_map.reply(MapQuery(tentative=True))["walls"] if w["id"] == 1]
+    shadow = [w for w in reply(wall_map, MapQuery(tentative=True))["walls"] if w["id"] == 1]
     assert shadow[0]["tentative"]
 
 
@@ -384,7 +390,7 @@ def test_walls_meeting_at_a_shallow_corner_end_at_it_though_seen_past_it():
     for band in (0.0, MapperConfig().corner_band):
         wall_map = WallMap(MapperConfig(corner_band=band))
         integrate_views(wall_map, [past_a, past_b], 6)
-        walls = wall_map.reply()["walls"]
+        walls = reply(wall_map)["walls"]
         assert len(walls) == 2
         misses[band] = [float(np.linalg.norm(nearest_end(w, corner) - corner)) for w in walls]
     assert max(misses[MapperConfig().corner_band]) < 0.02
@@ -394,7 +400,7 @@ def test_walls_meeting_at_a_shallow_corner_end_at_it_though_seen_past_it():
 def test_a_doorway_at_a_square_corner_stays_open():
     wall_map = WallMap()
     integrate_views(wall_map, [((-3.0, 2.0), (-0.6, 2.0)), ((0.0, 2.0), (0.0, 5.0))], 6)
-    walls = wall_map.reply()["walls"]
+    walls = reply(wall_map)["walls"]
     assert len(walls) == 2
     ends = sorted(nearest_end(w, (0.0, 2.0)).tolist() for w in walls)
     np.testing.assert_allclose(ends, [[-0.6, 2.0], [0.0, 2.0]], atol=0.02)
@@ -406,9 +412,9 @@ def test_a_line_blended_across_a_corner_lies_on_both_walls_and_is_a_shadow():
     # Seen from far, the corner came out as one short line halfway between the two walls.
     integrate_views(wall_map, [(turned(7.0, -0.4), turned(7.0, 0.4))], 4, first=20)
     assert len(wall_map.walls) == 3
-    served = wall_map.reply()["walls"]
+    served = reply(wall_map)["walls"]
     assert len(served) == 2
-    blend = [w for w in wall_map.reply(MapQuery(tentative=True))["walls"] if w["tentative"]]
+    blend = [w for w in reply(wall_map, MapQuery(tentative=True))["walls"] if w["tentative"]]
     assert len(blend) == 1
     assert blend[0]["n_obs"] == 4
 
@@ -418,4 +424,4 @@ def test_a_wall_beside_a_better_seen_neighbour_at_a_shallow_corner_is_no_shadow(
     # The neighbour, seen 30 times; the wall, 6 times; both seen 0.5 m past their corner.
     integrate_views(wall_map, [(turned(12.5, -0.5), turned(12.5, 4.0))], 30)
     integrate_views(wall_map, [((-1.9, 2.0), (0.5, 2.0))], 6, first=40)
-    assert len(wall_map.reply()["walls"]) == 2
+    assert len(reply(wall_map)["walls"]) == 2

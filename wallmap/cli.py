@@ -18,7 +18,8 @@ import zenoh
 
 from wallmap import __version__
 from wallmap.arg_types import positive
-from wallmap.common.map_query import QueryError, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import TfError
@@ -126,21 +127,20 @@ def _cmd_player(args: argparse.Namespace, config: Config) -> int:
     return 0
 
 
-def _fetch(args: argparse.Namespace, config: Config, **parameters: object) -> dict[str, object]:
-    """The live map, filtered by the command's --min-obs and --tentative, and ``parameters``."""
+def _fetch(args: argparse.Namespace, config: Config, **parameters: str) -> MapReply:
+    """The live map, filtered by the command's --min-obs and --tentative, and ``parameters``.
+
+    The selection is checked here as the mapper checks it, so a bad --bbox fails at once.
+    """
+    parameters |= {"min_obs": str(args.min_obs), "tentative": str(args.tentative).lower()}
+    query = MapQuery.from_parameters(parameters)
     with open_session(config.zenoh) as session:
-        return fetch_map(
-            session,
-            Keys(config.zenoh.prefix),
-            timeout=args.timeout,
-            min_obs=args.min_obs,
-            tentative=args.tentative or None,
-            **parameters,
-        )
+        return fetch_map(session, Keys(config.zenoh.prefix), query, timeout=args.timeout)
 
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
-    reply = _fetch(args, config, bbox=args.bbox, since=args.since)
+    filters = {"bbox": args.bbox, "since": None if args.since is None else repr(args.since)}
+    reply = _fetch(args, config, **{k: v for k, v in filters.items() if v is not None})
     print(to_json(reply) if args.json else format_table(reply))
     return 0
 
@@ -186,13 +186,13 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace, config: Config) -> int:
-    write_picture(args.out, _fetch(args, config, trajectory=True), size=args.size)
+    write_picture(args.out, _fetch(args, config, trajectory="true"), size=args.size)
     print(f"picture: {args.out}")
     return 0
 
 
 def _cmd_export(args: argparse.Namespace, config: Config) -> int:
-    write_geojson(args.out, _fetch(args, config, trajectory=True))
+    write_geojson(args.out, _fetch(args, config, trajectory="true"))
     print(f"GeoJSON: {args.out}")
     return 0
 

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from wallmap.common.map_records import MapReply, WallRecord
 
 WALL_PROPERTIES = ("id", "u", "v", "cov", "n_obs", "first_seen", "last_seen")
 
@@ -20,21 +23,17 @@ def _xy(point: Any) -> list[float]:
     return [float(point[0]), float(point[1])]
 
 
-def _wall_feature(wall: dict[str, Any]) -> dict[str, Any]:
-    """A wall as a LineString (p0 to p1) or, when it has segments, a MultiLineString of them."""
-    segments = wall.get("segments")
-    if segments:
-        lines = [[_xy(a), _xy(b)] for a, b in segments]
-        geometry = {"type": "MultiLineString", "coordinates": lines}
-    else:
-        lines = [[_xy(wall["p0"]), _xy(wall["p1"])]]
-        geometry = {"type": "LineString", "coordinates": lines[0]}
-    properties = {"kind": "wall", **{key: wall[key] for key in WALL_PROPERTIES}}
+def _wall_feature(wall: WallRecord) -> dict[str, Any]:
+    """A wall as a MultiLineString: the segments seen, between doors and gaps."""
+    lines = [[_xy(a), _xy(b)] for a, b in wall.segments]
+    geometry = {"type": "MultiLineString", "coordinates": lines}
+    record = wall.to_map()
+    properties = {"kind": "wall", **{key: record[key] for key in WALL_PROPERTIES}}
     properties["length"] = sum(math.dist(a, b) for a, b in lines)  # of the seen parts only
-    return {"type": "Feature", "id": wall["id"], "geometry": geometry, "properties": properties}
+    return {"type": "Feature", "id": wall.id, "geometry": geometry, "properties": properties}
 
 
-def _trajectory_feature(rows: list[list[float]]) -> dict[str, Any]:
+def _trajectory_feature(rows: Sequence[Sequence[float]]) -> dict[str, Any]:
     """The keyframes [stamp, x, y, yaw] as a LineString (a Point if there is only one)."""
     coordinates = [_xy(row[1:3]) for row in rows]
     geometry = (
@@ -50,21 +49,23 @@ def _trajectory_feature(rows: list[list[float]]) -> dict[str, Any]:
     return {"type": "Feature", "geometry": geometry, "properties": properties}
 
 
-def to_geojson(reply: dict[str, Any]) -> dict[str, Any]:
+def to_geojson(reply: MapReply) -> dict[str, Any]:
     """A FeatureCollection: one feature per wall, then the trajectory if the reply has one."""
-    features = [_wall_feature(w) for w in reply.get("walls", [])]
-    if reply.get("trajectory"):
-        features.append(_trajectory_feature(reply["trajectory"]))
+    features = [_wall_feature(w) for w in reply.walls]
+    if reply.trajectory:
+        features.append(_trajectory_feature(reply.trajectory))
     properties = {
-        "frame": reply.get("frame", "map"),
+        "frame": reply.frame,
         "units": "m",
         "note": "planar coordinates in metres in the map frame, not WGS 84",
-        **{key: reply[key] for key in ("frames", "observations", "stamp") if key in reply},
+        "frames": reply.frames,
+        "observations": reply.observations,
+        "stamp": reply.stamp,
     }
     return {"type": "FeatureCollection", "properties": properties, "features": features}
 
 
-def write_geojson(path: Path, reply: dict[str, Any]) -> None:
+def write_geojson(path: Path, reply: MapReply) -> None:
     """Write ``to_geojson(reply)`` to a file (strict JSON: non-finite numbers are an error)."""
     text = json.dumps(to_geojson(reply), allow_nan=False, indent=1)
     Path(path).write_text(text + "\n", encoding="utf-8")

@@ -43,6 +43,7 @@ from foxglove.messages import (
 )
 
 from wallmap.common import messages
+from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
 from wallmap.services.mapper.pose_buffer import PoseBuffer
 
 WALLS = "/wallmap/walls"
@@ -149,22 +150,21 @@ def _line_list(
     )
 
 
-def wall_entity(wall: dict[str, Any], ns: int, frame: str = "map") -> SceneEntity:
+def wall_entity(wall: WallRecord, ns: int, frame: str = "map") -> SceneEntity:
     """One wall of a map reply or update: its segments, its id as a label and as metadata.
 
     Tentative walls get their own colour: they are served only on request, and may be phantoms.
     """
-    (x0, y0), (x1, y1) = wall["p0"], wall["p1"]
+    (x0, y0), (x1, y1) = wall.p0, wall.p1
     keys = ("id", "u", "v", "n_obs", "n_views", "tentative", "first_seen", "last_seen")
+    record = wall.to_map()
     return SceneEntity(
         timestamp=timestamp(ns),
         frame_id=frame,
-        id=f"wall/{wall['id']}",
-        metadata=[KeyValuePair(key=k, value=_text(wall[k])) for k in keys if k in wall],
+        id=f"wall/{wall.id}",
+        metadata=[KeyValuePair(key=k, value=_text(record[k])) for k in keys],
         lines=[
-            _line_list(
-                wall["segments"], TENTATIVE if wall["tentative"] else CONFIRMED, WALL_THICKNESS
-            )
+            _line_list(wall.segments, TENTATIVE if wall.tentative else CONFIRMED, WALL_THICKNESS)
         ],
         texts=[
             TextPrimitive(
@@ -173,13 +173,13 @@ def wall_entity(wall: dict[str, Any], ns: int, frame: str = "map") -> SceneEntit
                 font_size=14.0,
                 scale_invariant=True,
                 color=LABEL,
-                text=str(wall["id"]),
+                text=str(wall.id),
             )
         ],
     )
 
 
-def walls_scene(walls: Iterable[dict[str, Any]], ns: int, frame: str = "map") -> SceneUpdate:
+def walls_scene(walls: Iterable[WallRecord], ns: int, frame: str = "map") -> SceneUpdate:
     """The whole map as one scene update.
 
     It deletes every entity first and then draws every wall, so each message stands alone:
@@ -187,7 +187,7 @@ def walls_scene(walls: Iterable[dict[str, Any]], ns: int, frame: str = "map") ->
     """
     return SceneUpdate(
         deletions=[SceneEntityDeletion(timestamp=timestamp(ns), type=SceneEntityDeletionType.All)],
-        entities=[wall_entity(w, ns, frame) for w in sorted(walls, key=lambda w: w["id"])],
+        entities=[wall_entity(w, ns, frame) for w in sorted(walls, key=lambda w: w.id)],
     )
 
 
@@ -231,7 +231,7 @@ class Bridge:
     """
 
     def __init__(self) -> None:
-        self.walls: dict[int, dict[str, Any]] = {}
+        self.walls: dict[int, WallRecord] = {}
         self.frame = "map"
         self.latest: dict[str, Out] = {}  # the last message of each LATCHED topic
         self._poses = PoseBuffer()
@@ -245,27 +245,27 @@ class Bridge:
             self.latest[topic] = out
         return out
 
-    def map_reply(self, reply: dict[str, Any]) -> list[Out]:
+    def map_reply(self, reply: MapReply) -> list[Out]:
         """The map as first fetched (with ``trajectory=true``): the walls and the path so far."""
-        self.frame = reply.get("frame", "map")
-        self.walls = {w["id"]: w for w in reply["walls"]}
+        self.frame = reply.frame
+        self.walls = {w.id: w for w in reply.walls}
         out = []
-        keyframes = reply.get("trajectory") or []
+        keyframes = reply.trajectory or ()
         if keyframes:
             path = trajectory(keyframes, self.frame)
             out.append(self._emit(TRAJECTORY, path, nanoseconds(keyframes[-1][0])))
-        stamp = reply.get("stamp")
-        if stamp is not None and self.walls:
-            out.append(self._walls(stamp))
+        if reply.stamp is not None and self.walls:
+            out.append(self._walls(reply.stamp))
         return out
 
-    def map_update(self, update: dict[str, Any]) -> list[Out]:
+    def map_update(self, update: MapUpdate) -> list[Out]:
         """A map update: keep the latest record per id, drop the merged ids, send the whole map."""
-        for wall in update["walls"]:
-            self.walls[wall["id"]] = wall
-        for gone in update["removed"]:
+        for wall in update.walls:
+            self.walls[wall.id] = wall
+        for gone in update.removed:
             self.walls.pop(gone, None)
-        return [self._walls(update["stamp"])]
+        stamp = update.stamp if update.stamp is not None else 0.0
+        return [self._walls(stamp)]
 
     def _walls(self, stamp: float) -> Out:
         ns = nanoseconds(stamp)

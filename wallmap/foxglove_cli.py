@@ -26,7 +26,8 @@ import zenoh
 from wallmap import __version__
 from wallmap.arg_types import port, positive
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import QueryError, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_records import MapUpdate
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import Keys, open_session
@@ -234,7 +235,8 @@ class _Relay:
         query and are already in the reply are dropped, or they would bring back merged walls.
         """
         try:
-            reply = fetch_map(session, keys, timeout=2.0, tentative=True, trajectory=True)
+            query = MapQuery(tentative=True, trajectory=True)
+            reply = fetch_map(session, keys, query, timeout=2.0)
             self._write(self.bridge.map_reply(reply))
         except QueryError as err:
             self.log.warning("%s: the walls come with the mapper's updates", err)
@@ -245,7 +247,7 @@ class _Relay:
         while (sample := updates.try_recv()) is not None:
             payload = sample.payload.to_bytes()
             try:
-                if decode(payload)["frames"] <= reply["frames"]:
+                if MapUpdate.from_map(decode(payload)).frames <= reply.frames:
                     continue
             except REFUSALS:
                 pass  # refused, with its reason, where it is handled
@@ -263,7 +265,7 @@ class _Relay:
             elif kind == "observations":
                 outs = self.bridge.observations(unpack_observations(payload))
             else:
-                outs = self.bridge.map_update(decode(payload))
+                outs = self.bridge.map_update(MapUpdate.from_map(decode(payload)))
         except REFUSALS as err:
             self.stats.refuse(kind, str(err))
             return

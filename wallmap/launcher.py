@@ -22,7 +22,7 @@ from importlib import resources
 from pathlib import Path
 
 from wallmap.common.evaluation import evaluate_map
-from wallmap.common.map_query import fetch_map
+from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -150,14 +150,14 @@ def _report(config: Config) -> None:
     """The final map: printed, scored, written as JSON (with the configuration), drawn."""
     options = config.up
     with open_session(config.zenoh) as session:
-        reply = fetch_map(session, Keys(config.zenoh.prefix), min_obs=options.min_obs,
-                          trajectory=True)  # fmt: skip
+        query = MapQuery(min_obs=options.min_obs, trajectory=True)
+        reply = fetch_map(session, Keys(config.zenoh.prefix), query)
     print(format_table(reply))
     if options.truth:
         plan, _, seen = load_truth(options.truth)
-        print(f"against the ground truth: {evaluate_map(reply['walls'], plan, seen).summary()}")
+        print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
     if options.json_out:
-        options.json_out.write_text(to_json({**reply, "config": to_plain(config)}), "utf-8")
+        options.json_out.write_text(to_json(reply, config=to_plain(config)), "utf-8")
     if options.picture:
         write_picture(options.picture, reply)
         print(f"picture: {options.picture}")

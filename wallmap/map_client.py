@@ -5,27 +5,29 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from wallmap.common.codec import SCHEMA_VERSION
+from wallmap.common.map_records import MapReply
 
-def format_table(reply: dict[str, Any]) -> str:
+
+def format_table(reply: MapReply) -> str:
     """The map as a fixed-width table, with the counters above it."""
-    walls = sorted(reply["walls"], key=lambda w: w["id"])
+    walls = sorted(reply.walls, key=lambda w: w.id)
     lines = [
-        f"{len(walls)} walls from {reply['frames']} frames and {reply['observations']} "
-        f"observations (frame {reply['frame']})",
+        f"{len(walls)} walls from {reply.frames} frames and {reply.observations} "
+        f"observations (frame {reply.frame})",
         f"{'id':>4} {'u':>8} {'v':>8} {'sigma':>7} {'x0':>8} {'y0':>8} {'x1':>8} {'y1':>8}"
         f" {'length':>7} {'n_obs':>6}",
     ]
     for w in walls:
-        sigma = max(w["cov"][0][0], w["cov"][1][1]) ** 0.5
-        (x0, y0), (x1, y1) = w["p0"], w["p1"]
-        length = ((x1 - x0) ** 2 + (y1 - y0) ** 2) ** 0.5
+        sigma = max(w.cov[0][0], w.cov[1][1]) ** 0.5
+        (x0, y0), (x1, y1) = w.p0, w.p1
         lines.append(
-            f"{w['id']:>4} {w['u']:>8.3f} {w['v']:>8.3f} {sigma:>7.4f} {x0:>8.3f} {y0:>8.3f}"
-            f" {x1:>8.3f} {y1:>8.3f} {length:>7.2f} {w['n_obs']:>6}"
+            f"{w.id:>4} {w.u:>8.3f} {w.v:>8.3f} {sigma:>7.4f} {x0:>8.3f} {y0:>8.3f}"
+            f" {x1:>8.3f} {y1:>8.3f} {w.length:>7.2f} {w.n_obs:>6}"
         )
     return "\n".join(lines)
 
 
-def to_json(reply: dict[str, Any]) -> str:
-    """The reply as the contract's JSON document."""
-    return json.dumps(reply, indent=1)
+def to_json(reply: MapReply, **extra: Any) -> str:
+    """The reply as the contract's JSON document (``extra`` fields added at its top)."""
+    return json.dumps({"v": SCHEMA_VERSION, **reply.to_map(), **extra}, indent=1)

@@ -10,16 +10,17 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.map_consistency import place_scan
 from wallmap.common.map_query import MapQuery
+from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.config import Config
+from wallmap.services.mapper import serving
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Pipeline
 from wallmap.services.player.bag_source import LASERSCAN
@@ -73,9 +74,9 @@ def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[flo
             yield frame.stamp, scan[np.isfinite(scan).all(axis=1)]
 
 
-def walls(wall_map: WallMap, min_obs: int = 1) -> list[dict[str, Any]]:
+def walls(wall_map: WallMap, min_obs: int = 1) -> tuple[WallRecord, ...]:
     """The served (confirmed) walls, as the map reply has them."""
-    return wall_map.reply(MapQuery(min_obs=min_obs))["walls"]
+    return serving.reply(wall_map, MapQuery(min_obs=min_obs)).walls
 
 
 def points_at_heights(

@@ -24,6 +24,8 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
+from wallmap.common.map_records import MapReply, WallRecord
+
 Array = np.ndarray
 
 BAND_SIGMAS = 2.0
@@ -178,18 +180,17 @@ class _Wall:
     bands: list[Array]  # (2K, 2) polygons
 
 
-def _wall_geometry(wall: dict[str, Any]) -> _Wall:
-    p0, p1 = np.asarray(wall["p0"], dtype=float), np.asarray(wall["p1"], dtype=float)
+def _wall_geometry(wall: WallRecord) -> _Wall:
+    p0, p1 = np.asarray(wall.p0, dtype=float), np.asarray(wall.p1, dtype=float)
     along = p1 - p0
     if np.linalg.norm(along) < 1e-12:
         along = np.array([1.0, 0.0])
     along = along / np.linalg.norm(along)
-    u, v = float(wall["u"]), float(wall["v"])
+    u, v = wall.u, wall.v
     r = math.hypot(u, v)
     normal = np.array([u, v]) / r if r > 1e-9 else _PERP.T @ along
-    raw = wall.get("segments") or [[wall["p0"], wall["p1"]]]
     pieces = []
-    for seg in raw:
+    for seg in wall.segments:
         a, b = np.asarray(seg, dtype=float)
         pieces.append(np.array([a, b]) if (b - a) @ along >= 0 else np.array([b, a]))
     pieces.sort(key=lambda s: float(s[0] @ along))
@@ -201,14 +202,14 @@ def _wall_geometry(wall: dict[str, Any]) -> _Wall:
     bands = []
     for a, b in pieces:
         pts = a + np.linspace(0.0, 1.0, 5)[:, None] * (b - a)  # the band bulges between ends
-        half = band_half_width(u, v, wall["cov"], pts, normal)[:, None]
+        half = band_half_width(u, v, np.asarray(wall.cov), pts, normal)[:, None]
         bands.append(np.vstack([pts + half * normal, (pts - half * normal)[::-1]]))
-    return _Wall(wall["id"], pieces, gaps, normal, bands)
+    return _Wall(wall.id, pieces, gaps, normal, bands)
 
 
-def _trajectory_xy(reply: dict[str, Any], trajectory: Array | None) -> Array:
+def _trajectory_xy(reply: MapReply, trajectory: Array | None) -> Array:
     if trajectory is None:
-        rows = reply.get("trajectory") or []
+        rows = reply.trajectory or ()
         return np.array([row[1:3] for row in rows], dtype=float).reshape(-1, 2)
     trajectory = np.asarray(trajectory, dtype=float)
     if trajectory.ndim != 2 or trajectory.shape[1] not in (2, 4):
@@ -226,7 +227,7 @@ def _scale_bar_length(scale: float, width: int) -> float:
 
 
 def render_map(
-    reply: dict[str, Any],
+    reply: MapReply,
     *,
     trajectory: Array | None = None,
     size: int = 1000,
@@ -235,14 +236,14 @@ def render_map(
     """Lay out a map reply as a picture whose longer side is about ``size`` pixels.
 
     Args:
-        reply: the map reply (``walls``, and ``frames``/``observations`` for the title).
+        reply: the map reply (its walls, and its counts for the title).
         trajectory: (N, 2) x, y or (N, 4) stamp, x, y, yaw in the map frame; by default the
             reply's own ``trajectory``, if it has one.
         size: pixels of the longer side; line widths and text scale with it.
         points: (N, 2) sensor points in the map frame, drawn grey under the walls (what the
             map should cover), one square per pixel they fall in.
     """
-    walls = [_wall_geometry(w) for w in reply.get("walls", [])]
+    walls = [_wall_geometry(w) for w in reply.walls]
     path = _trajectory_xy(reply, trajectory)
     cloud = np.zeros((0, 2)) if points is None else np.asarray(points, dtype=float)
     content = [path, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
@@ -259,9 +260,7 @@ def render_map(
     inner_y = TITLE_HEIGHT + (height - TITLE_HEIGHT - span[1] * scale) / 2
     offset = (inner_x - lo[0] * scale, inner_y + hi[1] * scale)
 
-    counts = [f"{len(walls)} walls"]
-    counts += [f"{reply[key]} {key}" for key in ("frames", "observations") if key in reply]
-    title = ", ".join(counts)
+    title = f"{len(walls)} walls, {reply.frames} frames, {reply.observations} observations"
     drawing = Drawing(width, height, scale, offset, title)
     unit = size / 1000  # line widths and text grow with the picture
     items = drawing.items
@@ -543,7 +542,7 @@ def encode_png(image: Array) -> bytes:
 
 def write_png(
     path: Path,
-    reply: dict[str, Any],
+    reply: MapReply,
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
@@ -555,7 +554,7 @@ def write_png(
 
 def write_svg(
     path: Path,
-    reply: dict[str, Any],
+    reply: MapReply,
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
@@ -567,7 +566,7 @@ def write_svg(
 
 def write_picture(
     path: Path,
-    reply: dict[str, Any],
+    reply: MapReply,
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,

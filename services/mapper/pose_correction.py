@@ -26,7 +26,8 @@ import numpy as np
 from wallmap.common import ekf, pose_ekf, slam_ekf
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.common.pose_ekf import Array, OdometryNoise
-from wallmap.services.mapper.wall_map import Wall, WallMap
+from wallmap.services.mapper.wall import Wall
+from wallmap.services.mapper.wall_map import WallMap
 
 START_COV = np.diag([1e-6, 1e-6, 1e-8])  # the first pose defines the map frame
 MOVED = 1e-4  # m or rad: a wall of the window moved this much is a change of the map

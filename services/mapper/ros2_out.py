@@ -22,6 +22,7 @@ import numpy as np
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
+from wallmap.common.map_records import MapReply, WallRecord
 from wallmap.common.transport import Keys
 
 STORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -84,14 +85,14 @@ def _empty_bytes() -> Any:
 
 
 def markers(
-    walls: Sequence[dict[str, Any]], deleted: Iterable[int], stamp: float, frame: str = "map"
+    walls: Sequence[WallRecord], deleted: Iterable[int], stamp: float, frame: str = "map"
 ) -> bytes:
     """The CDR of a MarkerArray: an ADD for every wall record, a DELETE for every deleted id."""
     marker_type = _T["visualization_msgs/msg/Marker"]
     out = []
     for wall in walls:
-        points = [_point(x, y) for seg in wall["segments"] for x, y in seg]
-        out.append(_marker(wall["id"], marker_type.ADD, points, stamp, frame))
+        points = [_point(x, y) for seg in wall.segments for x, y in seg]
+        out.append(_marker(wall.id, marker_type.ADD, points, stamp, frame))
     out += [_marker(wall_id, marker_type.DELETE, [], stamp, frame) for wall_id in deleted]
     message = _T["visualization_msgs/msg/MarkerArray"](markers=out)
     return bytes(STORE.serialize_cdr(message, "visualization_msgs/msg/MarkerArray"))
@@ -121,9 +122,9 @@ class MarkerState:
     def __init__(self) -> None:
         self._shown: set[int] = set()
 
-    def payload(self, walls: Sequence[dict[str, Any]], stamp: float, frame: str) -> bytes:
+    def payload(self, walls: Sequence[WallRecord], stamp: float, frame: str) -> bytes:
         """The MarkerArray for the served ``walls``, with DELETEs for ids no longer among them."""
-        ids = {int(w["id"]) for w in walls}
+        ids = {w.id for w in walls}
         gone = sorted(self._shown - ids)
         self._shown = ids
         return markers(walls, gone, stamp, frame)
@@ -155,11 +156,11 @@ class Ros2Outlet:
         if payload is not None:
             query.reply(query.key_expr, payload)
 
-    def publish(self, reply: dict[str, Any]) -> None:
+    def publish(self, reply: MapReply) -> None:
         """The map reply (confirmed walls, with the trajectory) as markers and a path."""
-        stamp = reply.get("stamp") or 0.0
-        markers_cdr = self._state.payload(reply["walls"], stamp, self._frame)
-        path_cdr = path(reply.get("trajectory", []), stamp, self._frame)
+        stamp = reply.stamp or 0.0
+        markers_cdr = self._state.payload(reply.walls, stamp, self._frame)
+        path_cdr = path(reply.trajectory or (), stamp, self._frame)
         with self._lock:
             self._latest[self._keys.markers] = markers_cdr
             self._latest[self._keys.trajectory] = path_cdr

@@ -23,19 +23,20 @@ from typing import Any
 
 import zenoh
 
-from wallmap.common.codec import MessageError, encode
+from wallmap.common.codec import SCHEMA_VERSION, MessageError, encode
 from wallmap.common.history import History, subscribe_with_history
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, Progress, pack, unpack_observations
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.mapper import state_file
+from wallmap.services.mapper import serving, state_file
 from wallmap.services.mapper.in_order import InOrder
+from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
 from wallmap.services.mapper.ros2_out import Ros2Outlet
-from wallmap.services.mapper.wall_map import MapperConfig, WallMap
+from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Mapping
 
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
@@ -146,9 +147,9 @@ class MapperCore:
                 self._replies.clear()
             key = (state, query, fmt)
             if key not in self._replies:
-                body = {**self.map.reply(query), **extra}
+                body = replace(serving.reply(self.map, query), counters=extra).to_map()
                 if fmt == "json":
-                    self._replies[key] = json.dumps({"v": 1, **body}).encode()
+                    self._replies[key] = json.dumps({"v": SCHEMA_VERSION, **body}).encode()
                 else:
                     self._replies[key] = encode(body)
             return self._replies[key]
@@ -351,9 +352,9 @@ def _updates(
         with core.lock:
             if not core.map.changed and not core.map.removed:
                 continue
-            changes = core.map.take_changes()
-            served = core.map.reply(MapQuery(trajectory=True)) if ros2 is not None else None
-        updates.put(encode(changes))
+            changes = serving.take_changes(core.map)
+            served = serving.reply(core.map, MapQuery(trajectory=True)) if ros2 else None
+        updates.put(encode(changes.to_map()))
         if ros2 is not None and served is not None:
             ros2.publish(served)
 

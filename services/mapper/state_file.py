@@ -18,7 +18,9 @@ import numpy as np
 
 from wallmap.common.messages import Progress
 from wallmap.services.mapper.extent import Extent
-from wallmap.services.mapper.wall_map import MapperConfig, Wall, WallMap
+from wallmap.services.mapper.map_config import MapperConfig
+from wallmap.services.mapper.wall import Wall
+from wallmap.services.mapper.wall_map import WallMap
 
 STATE_VERSION = 1
 

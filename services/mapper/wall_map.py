@@ -1,124 +1,36 @@
-"""The wall map: one small EKF per wall, gated maximum-likelihood association. Pure, no Zenoh.
+"""The wall map's estimation: one small EKF per wall, gated maximum-likelihood association.
 
 For each observed wall, every mapped wall whose extent lies near the observed segment is scored
 by the log-likelihood of the innovation under the innovation covariance; the best one that passes
 the chi-square gate takes the observation, otherwise the observation starts a new wall. The extent
 check is what keeps two collinear walls in different rooms apart: on the line alone they are the
-same wall.
+same wall. Walls found to be one merge (the older id survives); rays that passed through a wall's
+line mark where it is not. What is served of all this is ``serving``'s policy. Pure, no Zenoh.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common import ekf, wall_model
-from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
+from wallmap.services.mapper.map_config import MapperConfig
+from wallmap.services.mapper.wall import Wall
 from wallmap.services.mapper.wall_index import WallIndex
 
 Array = NDArray[np.float64]
 
 
-SHADOW_SAMPLES = 21  # points along a wall tested for a shadow
 NEAR_LINE = 1.0  # m: farther lines are never candidates for an observation
 THROUGH_MARGIN = 0.1  # m: a ray ends this far past a wall (plus its noise) to cross it
 THROUGH_NOISE = 3e-3  # m per m^2 of range: 3 sigma of a depth camera's range noise, a little more
 THROUGH_NEAR = 0.3  # m from the sensor: nearer crossings are not counted
 CROSSING_ANGLE = math.radians(30.0)  # a wall at least this far from parallel may cross a gap
 CROSSING_REACH = 0.2  # m it must reach past the line on both sides: a T only meets it
-SEEN_THROUGH = 0.5  # a wall seen through along this share of its length is none
-
-
-@dataclass(frozen=True)
-class MapperConfig:
-    """Everything that tunes the map.
-
-    Attributes:
-        gate: chi-square gate on the squared Mahalanobis distance of the innovation.
-        max_extent_gap: an observed segment farther than this along the wall from the wall's
-            extent is another wall on the same line (m).
-        pose_sd: x, y (m) and yaw (rad) standard deviations assumed for poses that carry no
-            covariance: no pose source is exact, and without it a wall seen a hundred times
-            would refuse the next good observation.
-        merge_angle: two walls whose lines differ by less than this angle (rad)...
-        merge_offset: ...and lie closer than this (m) where their extents overlap are one wall:
-            they merge, and the older id survives. 3 degrees and 10 cm is also the rule by which
-            two walls count as a duplicate (docs/real-data.md); the two faces of a wall thinner
-            than 10 cm, seen from both sides, become one.
-        corner_reach: served ends of two confirmed walls that both lie this close (m) to where
-            their lines cross meet there: each wall's extent overshoots a corner a little, where
-            its detected lines took in points of the other wall.
-        corner_band: ...or within this (m) divided by the sine of the angle between them,
-            whichever is farther: a detected line takes in the other wall's points up to where
-            that wall leaves its inlier band, ``band / sin(angle)`` past a shallow corner
-            (0.15 m is the band of a Kinect-like camera at about 6 m).
-        corner_max_reach: the farthest an end moves to a corner (m): lines a few degrees apart
-            that cross mid-length are no corner, and are not cut there.
-        corner_angle: walls closer to parallel than this (rad) have no corner.
-        shadow_angle: a wall that lies, along ``shadow_cover`` of its length, within
-            ``shadow_offset`` (m) of walls seen ``shadow_ratio`` times as often and at most this
-            angle (rad) from it is a shadow of them: a line blended across a shallow corner
-            from far away, lying on one wall or on both walls of the corner. It is served as
-            tentative.
-        shadow_offset: see above.
-        shadow_ratio: see above.
-        shadow_cover: see above.
-        merge_gap: two confirmed walls on one line (their estimates agree, see
-            ``line_agreement``) separated along it by at most this (m) are one wall with a gap:
-            a door, a window, an occlusion...
-        door_width: ...but one with a gap wider than a door that the sensor saw through (rays
-            crossing the gap well before they ended) is two walls; so are two whose gap a wall
-            crosses.
-        line_floor: offset (m) and angle (rad) standard deviations added to both estimates when
-            testing whether two walls are on one line: walls are not perfectly straight.
-        fan_angle: of two confirmed walls within this angle (rad)...
-        fan_offset: ...and this distance (m) whose segments overlap by more than...
-        fan_overlap: ...this (m), only the one seen more often is served (see ``_fanned``).
-        min_length: a wall whose served segments add up to less than this (m) is served as
-            tentative: the detector reports no shorter line, so such a wall is a sliver of one.
-        confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
-        confirm_views: ...from this many distinct viewpoints (moved ``view_distance`` or turned
-            ``view_angle`` since the last one): one glimpse, however long, is not a wall.
-        keyframe_distance: the trajectory kept with the map has a pose every this far (m)...
-        keyframe_angle: ...or every this much turn (rad); also the distinct-view thresholds.
-    """
-
-    gate: float = ekf.CHI2_2DOF_999
-    max_extent_gap: float = 1.0
-    pose_sd: tuple[float, float, float] = (0.02, 0.02, math.radians(0.5))
-    merge_angle: float = np.radians(3.0)
-    merge_offset: float = 0.10
-    corner_reach: float = 0.4
-    corner_band: float = 0.15
-    corner_max_reach: float = 0.6
-    corner_angle: float = np.radians(3.0)
-    shadow_angle: float = np.radians(15.0)
-    shadow_offset: float = 0.10
-    shadow_ratio: float = 2.0
-    shadow_cover: float = 0.7
-    merge_gap: float = 3.0
-    door_width: float = 1.8
-    line_floor: tuple[float, float] = (0.01, float(np.radians(0.5)))
-    fan_angle: float = np.radians(8.0)
-    fan_offset: float = 0.30
-    fan_overlap: float = 0.3
-    min_length: float = 0.25
-    confirm_obs: int = 3
-    confirm_views: int = 2
-    keyframe_distance: float = 0.1
-    keyframe_angle: float = np.radians(5.0)
-
-    @property
-    def pose_cov(self) -> Array:
-        """The covariance of ``pose_sd``."""
-        return np.diag(np.square(self.pose_sd))
 
 
 def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
@@ -132,135 +44,6 @@ def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     (ax, ay, ayaw), (bx, by, byaw) = a.tolist(), b.tolist()
     turn = abs((byaw - ayaw + math.pi) % (2 * math.pi) - math.pi)
     return math.hypot(bx - ax, by - ay) >= distance or turn >= angle
-
-
-def _end_near(ends: list[float], px: float, py: float, reach: float) -> int | None:
-    """Which wall end lies within reach of point (px, py), the nearer if both, or None.
-
-    ``ends`` is (x0, y0, x1, y1): 0 is the first segment's start, 1 the last one's end.
-    """
-    x0, y0, x1, y1 = ends
-    d0, d1 = math.hypot(x0 - px, y0 - py), math.hypot(x1 - px, y1 - py)
-    best, distance = (0, d0) if d0 <= d1 else (1, d1)
-    return best if distance <= reach else None
-
-
-def _passes(ends: list[float], px: float, py: float, margin: float) -> bool:
-    """Whether point (px, py), on a wall's line, lies between its ends, ``margin`` inside."""
-    x0, y0, x1, y1 = ends
-    dx, dy = x1 - x0, y1 - y0
-    length = math.hypot(dx, dy)
-    along = ((px - x0) * dx + (py - y0) * dy) / max(length, 1e-12)
-    return margin < along < length - margin
-
-
-def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
-    """Whether segment p0-p1 meets the box (Liang-Barsky clipping)."""
-    lo, hi = np.array(box[:2]), np.array(box[2:])
-    start, end, d = 0.0, 1.0, p1 - p0
-    for axis in (0, 1):
-        if abs(d[axis]) < 1e-12:
-            if not lo[axis] <= p0[axis] <= hi[axis]:
-                return False
-            continue
-        t0, t1 = sorted(((lo[axis] - p0[axis]) / d[axis], (hi[axis] - p0[axis]) / d[axis]))
-        start, end = max(start, t0), min(end, t1)
-    return start <= end
-
-
-@dataclass
-class Wall:
-    """One mapped wall: its EKF state (anchored closest point), covariance and extent.
-
-    ``ends`` is the union of everything observed (it decides which walls an observation may
-    join); ``extent`` counts observations along the wall and gives the served segments.
-    """
-
-    id: int
-    s: Array
-    p: Array
-    anchor: Array
-    ends: Array  # 2x2, map frame, on the line
-    extent: Extent
-    n_obs: int
-    first_seen: float
-    last_seen: float
-    views: int
-    last_view: Array  # (x, y, yaw) of the last distinct viewpoint
-    depth_obs: int = 0  # observations from a depth camera (the rest from a scanner)
-
-    def __post_init__(self) -> None:
-        self._segments: tuple[tuple[int, bytes], Array] | None = None
-        self.set_state(self.s, self.p)
-
-    def set_state(self, s: Array, p: Array) -> None:
-        """New EKF state; the line's foot point, direction and normal follow."""
-        self.s, self.p = s, p
-        self.foot = wall_model.foot(s, self.anchor)
-        (fx, fy), (sx, sy) = self.foot.tolist(), s.tolist()
-        r = math.hypot(sx, sy)
-        nx, ny = sx / r, sy / r
-        self.normal = np.array([nx, ny])
-        self.direction = np.array([-ny, nx])  # wall_model.direction, in floats
-        # The same as plain floats, and the extent's span along the line, for _near's hot loop.
-        self.frame = (fx, fy, -ny, nx, nx, ny)
-        self.span = self._span(self.ends.tolist())
-
-    def _span(self, points: list[list[float]]) -> tuple[float, float]:
-        """Lowest and highest position of map points along the wall (plain floats)."""
-        fx, fy, dx, dy, _, _ = self.frame
-        t = [(x - fx) * dx + (y - fy) * dy for x, y in points]
-        return min(t), max(t)
-
-    def along(self, points: Array) -> Array:
-        """Positions of map points along the wall, from its foot point."""
-        return (points - self.foot) @ self.direction
-
-    def on_line(self, t: Array) -> Array:
-        """Map points at positions ``t`` along the wall."""
-        return self.foot + np.outer(t, self.direction)
-
-    def extend(self, points: Array) -> None:
-        """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
-        self.span = self._span(self.ends.tolist() + points.tolist())
-        self.ends = self.on_line(np.array(self.span))
-
-    def segments(self) -> Array:
-        """The served segments (k x 2 x 2), from the extent counts, on the current line.
-
-        Kept until the line or the counts change (every change to the counts comes with one to
-        ``n_obs``), so replies on a large map redo only the walls that changed. Read-only.
-        """
-        key = (self.n_obs, self.extent.revision, self.s.tobytes())
-        if self._segments is None or self._segments[0] != key:
-            intervals = self.extent.intervals()
-            axis = self.extent.origin + np.outer(np.ravel(intervals), self.extent.direction)
-            pieces = self.on_line(self.along(axis)).reshape(-1, 2, 2)
-            pieces.flags.writeable = False
-            self._segments = (key, pieces)
-        return self._segments[1]
-
-    def confirmed(self, config: MapperConfig) -> bool:
-        """Seen often enough, from enough viewpoints, to be served as a wall."""
-        return self.n_obs >= config.confirm_obs and self.views >= config.confirm_views
-
-    def to_reply(self, segments: Array, *, tentative: bool) -> dict[str, Any]:
-        """The contract's wall record, in the map frame, with its segments."""
-        uv, jac = wall_model.to_map_frame(self.s, self.anchor)
-        return {
-            "id": self.id,
-            "u": float(uv[0]),
-            "v": float(uv[1]),
-            "cov": (jac @ self.p @ jac.T).tolist(),
-            "p0": segments[0, 0].tolist(),
-            "p1": segments[-1, 1].tolist(),
-            "segments": segments.tolist(),
-            "n_obs": self.n_obs,
-            "n_views": self.views,
-            "tentative": tentative,
-            "first_seen": self.first_seen,
-            "last_seen": self.last_seen,
-        }
 
 
 class WallMap:
@@ -540,181 +323,6 @@ class WallMap:
         self.changed.add(wall.id)
         self.next_id += 1
         return wall
-
-    def _shadowed(self, wall: Wall) -> bool:
-        """Whether far better supported walls run along most of this one (see MapperConfig).
-
-        The wall is sampled along its extent; a sample is covered where a better supported
-        wall within ``shadow_angle`` passes within ``shadow_offset`` of it, inside that
-        wall's extent. Two such walls can cover a line blended across the corner they make.
-        """
-        cfg = self.config
-        pieces = wall.segments()
-        (ax, ay), (bx, by) = pieces[0, 0].tolist(), pieces[-1, 1].tolist()
-        samples: Array | None = None
-        covered = np.zeros(SHADOW_SAMPLES, dtype=bool)
-        cos_max, offset = math.cos(cfg.shadow_angle), cfg.shadow_offset
-        for other in (self.walls[i] for i in self.index.near(wall.ends)):
-            if other is wall or other.n_obs < cfg.shadow_ratio * wall.n_obs:
-                continue
-            fx, fy, _, _, nx, ny = other.frame
-            if abs(wall.frame[4] * nx + wall.frame[5] * ny) < cos_max:
-                continue
-            # Both ends beyond the band on one side: no point between them is inside it.
-            da, db = (ax - fx) * nx + (ay - fy) * ny, (bx - fx) * nx + (by - fy) * ny
-            if min(da, db) > offset or max(da, db) < -offset:
-                continue
-            if samples is None:
-                samples = np.linspace(pieces[0, 0], pieces[-1, 1], SHADOW_SAMPLES)
-            across = np.abs((samples - other.foot) @ other.normal)
-            along = other.along(samples)
-            theirs = other.segments()
-            low, high = other.along(theirs[0, 0]), other.along(theirs[-1, 1])
-            covered |= (across <= offset) & (along >= low - offset) & (along <= high + offset)
-        return float(covered.mean()) >= cfg.shadow_cover
-
-    def served(self, wall: Wall) -> bool:
-        """Confirmed, not seen through, not a shadow of another wall: what a reply serves."""
-        if not wall.confirmed(self.config):
-            return False
-        if wall.extent.free_share() >= SEEN_THROUGH:
-            return False
-        pieces = wall.segments()
-        length = float(np.linalg.norm(pieces[:, 1] - pieces[:, 0], axis=1).sum())
-        if length < self.config.min_length or self._shadowed(wall):
-            return False
-        return not self._fanned(wall, pieces)
-
-    def _fanned(self, wall: Wall, pieces: Array) -> bool:
-        """Whether a better-seen confirmed wall runs alongside: one surface as two lines.
-
-        On real clutter a surface and what stands against it (a cabinet front, appliances on a
-        counter) come out as lines a few degrees and centimetres apart. Of two confirmed walls
-        within ``fan_angle`` and ``fan_offset`` whose segments overlap by ``fan_overlap``, only
-        the one seen more often (the older on a tie) is served. Walls seen mostly by a scanner
-        are left alone: its one plane sees no clutter stand against walls, and a bent wall's
-        near-parallel pieces are each where its points are.
-        """
-        cfg = self.config
-        if 2 * wall.depth_obs <= wall.n_obs:
-            return False
-        cos_max = math.cos(cfg.fan_angle)
-        ta = wall.along(pieces.reshape(-1, 2))
-        for other in (self.walls[i] for i in sorted(self.index.near(wall.ends))):
-            if other is wall or (other.n_obs, -other.id) < (wall.n_obs, -wall.id):
-                continue
-            if abs(float(wall.normal @ other.normal)) < cos_max or not other.confirmed(cfg):
-                continue
-            if 2 * other.depth_obs <= other.n_obs:
-                continue
-            theirs = other.segments()
-            tb = wall.along(theirs.reshape(-1, 2))
-            low, high = max(ta.min(), tb.min()), min(ta.max(), tb.max())
-            if high - low <= cfg.fan_overlap:
-                continue
-            middle = wall.on_line(np.array([0.5 * (low + high)]))[0]
-            if abs(float(other.normal @ (middle - other.foot))) <= cfg.fan_offset:
-                return True
-        return False
-
-    def _selected(self, wall: Wall, query: MapQuery, served: dict[int, bool]) -> bool:
-        served[wall.id] = self.served(wall)
-        if wall.n_obs < query.min_obs or (not query.tentative and not served[wall.id]):
-            return False
-        if query.since is not None and wall.last_seen < query.since:
-            return False
-        return query.bbox is None or any(_crosses_box(a, b, query.bbox) for a, b in wall.segments())
-
-    def cornered_segments(self, ids: Iterable[int], served: dict[int, bool]) -> dict[int, Array]:
-        """The segments of walls ``ids``, with their ends joined at corners.
-
-        An end of a served wall that meets a served neighbour's end at a corner moves onto the
-        corner (an L); so does one that meets a neighbour going on through the crossing (a T),
-        which keeps its segments. ``served`` caches :meth:`served` and comes back filled for
-        ``ids``.
-        """
-        raw: dict[int, tuple[Array, list[float]]] = {}
-
-        def segments(wall: Wall) -> tuple[Array, list[float]]:
-            """The wall's segments and its two ends (x0, y0, x1, y1) as floats."""
-            if wall.id not in raw:
-                pieces = wall.segments()
-                raw[wall.id] = pieces, [*pieces[0, 0].tolist(), *pieces[-1, 1].tolist()]
-            return raw[wall.id]
-
-        def is_served(wall: Wall) -> bool:
-            if wall.id not in served:
-                served[wall.id] = self.served(wall)
-            return served[wall.id]
-
-        cfg = self.config
-        sin_min, reach = math.sin(cfg.corner_angle), cfg.corner_reach
-        band, max_reach = cfg.corner_band, cfg.corner_max_reach
-        out = {}
-        for wall_id in ids:
-            a = self.walls[wall_id]
-            pieces, a_ends = segments(a)
-            mine = pieces.copy()
-            out[wall_id] = mine
-            if not is_served(a):
-                continue
-            afx, afy, _, _, anx, any_ = a.frame
-            a_offset = anx * afx + any_ * afy
-            for b in (self.walls[i] for i in sorted(self.index.near(a.ends)) if i != a.id):
-                bfx, bfy, _, _, bnx, bny = b.frame
-                det = anx * bny - any_ * bnx  # sine of the angle between the lines
-                if abs(det) < sin_min or not is_served(b):
-                    continue
-                b_offset = bnx * bfx + bny * bfy
-                # Where the two lines cross (Cramer's rule on the 2x2 system of their normals).
-                cx = (a_offset * bny - any_ * b_offset) / det
-                cy = (anx * b_offset - bnx * a_offset) / det
-                # The shallower the corner, the farther past it the inlier band reaches.
-                far = min(max_reach, max(reach, band / abs(det)))
-                end_a = _end_near(a_ends, cx, cy, far)
-                if end_a is None:
-                    continue
-                b_ends = segments(b)[1]
-                # An L (both end at the crossing) or a T (b goes on through it): a's end goes
-                # there. The wall that goes on through a T is not cut (its end is not near).
-                if _end_near(b_ends, cx, cy, far) is not None or _passes(b_ends, cx, cy, far):
-                    mine[(0, -1)[end_a], end_a] = (cx, cy)
-        return out
-
-    def reply(self, query: MapQuery | None = None) -> dict[str, Any]:
-        """The contract's map reply (without the schema version, which the codec adds)."""
-        query = query or MapQuery()
-        served: dict[int, bool] = {}
-        chosen = [w.id for w in self.walls.values() if self._selected(w, query, served)]
-        segments = self.cornered_segments(chosen, served)
-        body: dict[str, Any] = {
-            "frame": "map",
-            "frames": self.frames,
-            "observations": self.observations,
-            "stamp": self.stamp,
-            "walls": [self.walls[i].to_reply(segments[i], tentative=not served[i]) for i in chosen],
-            "merges": [list(m) for m in self.merges],
-        }
-        if query.trajectory:
-            body["trajectory"] = [list(p) for p in self.trajectory]
-        return body
-
-    def take_changes(self) -> dict[str, Any]:
-        """Walls changed and ids removed since the last call: the body of a map update.
-
-        A wall's neighbours come along: a change can move the corner they share.
-        """
-        ids = set(self.changed)
-        for i in self.changed:
-            ids |= self.index.near(self.walls[i].ends)
-        served: dict[int, bool] = {}
-        segments = self.cornered_segments(sorted(ids), served)
-        walls = [self.walls[i].to_reply(segments[i], tentative=not served[i]) for i in sorted(ids)]
-        removed = sorted(self.removed)
-        self.changed.clear()
-        self.removed.clear()
-        return {"frames": self.frames, "stamp": self.stamp, "walls": walls, "removed": removed}
-
 
 def _seen_through(wall: Wall, ends: Array) -> float:
     """Share of a stretch of ``wall``'s line (two map points) that rays crossed repeatedly."""

@@ -18,7 +18,7 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.codec import MessageError
 from wallmap.common.history import History, declare_history_publisher
-from wallmap.common.map_query import QueryError, fetch_map
+from wallmap.common.map_query import MalformedReplyError, QueryError, fetch_map
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, received_frames, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
@@ -92,12 +92,11 @@ def run(
 def _first_walls(session: zenoh.Session, keys: Keys, tracker: PoseTracker, stats: Stats) -> None:
     """The walls mapped before this service started (a restart, or a map kept in a state file)."""
     try:
-        reply = fetch_map(session, keys, timeout=1.0)
-        tracker.set_walls(reply.get("walls", []))
+        tracker.set_walls(fetch_map(session, keys, timeout=1.0).walls)
+    except MalformedReplyError as err:
+        stats.refuse("map", str(err))
     except QueryError:
         return  # no mapper yet: the walls come with its updates
-    except MessageError as err:
-        stats.refuse("map", str(err))
 
 
 def _take_updates(updates: queue.SimpleQueue[bytes], tracker: PoseTracker, stats: Stats) -> None:

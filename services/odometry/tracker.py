@@ -11,14 +11,14 @@ the poses that follow. Where the walls say nothing (along a corridor), the prior
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common.codec import MessageError, decode
+from wallmap.common.codec import decode
+from wallmap.common.map_records import MapUpdate, WallRecord
 from wallmap.common.messages import Pose
 from wallmap.common.scan_matching import (
     MatcherConfig,
@@ -30,7 +30,6 @@ from wallmap.common.scan_matching import (
 
 Array = NDArray[np.float64]
 # What a malformed wall record raises on the way in (a field missing, of a wrong type or size).
-RECORD_ERRORS = (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError)
 
 
 @dataclass(frozen=True)
@@ -82,19 +81,9 @@ def _rotate_cov(cov: Array, yaw: float) -> Array:
     return rot @ cov @ rot.T
 
 
-def wall_lines(record: Mapping[str, Any]) -> list[WallLine]:
-    """The lines of one wall of a map reply or update: one per served segment.
-
-    Raises:
-        MessageError: The record lacks segments or they are not finite 2-D points.
-    """
-    try:
-        segments = np.asarray(record["segments"], dtype=float).reshape(-1, 2, 2)
-    except (KeyError, TypeError, ValueError) as err:
-        msg = f"wall record without usable segments: {err}"
-        raise MessageError(msg) from err
-    if not np.isfinite(segments).all():
-        raise MessageError("wall record with non-finite segments")
+def wall_lines(record: WallRecord) -> list[WallLine]:
+    """The lines of one wall of a map reply or update: one per served segment."""
+    segments = np.asarray(record.segments, dtype=float).reshape(-1, 2, 2)
     return [WallLine.from_points(a, b) for a, b in segments if float(np.linalg.norm(b - a)) > 1e-3]
 
 
@@ -112,34 +101,17 @@ class PoseTracker:
         """Walls currently used as landmarks."""
         return len(self._walls)
 
-    def set_walls(self, records: Iterable[Mapping[str, Any]], removed: Iterable[int] = ()) -> None:
-        """Take walls from a map reply or update; unsettled and tentative ones are left out.
-
-        Raises:
-            MessageError: A record is malformed (the others are still taken).
-        """
-        try:
-            records, gone = list(records), [int(wall_id) for wall_id in removed]
-        except RECORD_ERRORS as err:
-            raise MessageError(f"malformed map update: {err}") from err
-        for wall_id in gone:
+    def set_walls(self, records: Iterable[WallRecord], removed: Iterable[int] = ()) -> None:
+        """Take walls from a map reply or update; unsettled and tentative ones are left out."""
+        for wall_id in removed:
             self._walls.pop(wall_id, None)
-        problem: MessageError | None = None
         for record in records:
-            try:
-                wall_id = int(record["id"])
-                usable = int(record["n_obs"]) >= self.config.wall_min_obs
-                usable = usable and not record.get("tentative", False)
-                lines = wall_lines(record) if usable else []
-            except (*RECORD_ERRORS, MessageError) as err:
-                problem = MessageError(f"malformed wall record: {err}")
-                continue
+            usable = record.n_obs >= self.config.wall_min_obs and not record.tentative
+            lines = wall_lines(record) if usable else []
             if lines:
-                self._walls[wall_id] = lines
+                self._walls[record.id] = lines
             else:
-                self._walls.pop(wall_id, None)
-        if problem is not None:
-            raise problem
+                self._walls.pop(record.id, None)
 
     def take_update(self, payload: bytes) -> None:
         """Take a ``{prefix}/map/updates`` message: the walls that changed, the ids removed.
@@ -147,8 +119,8 @@ class PoseTracker:
         Raises:
             MessageError: The message, or a record in it, is malformed.
         """
-        update = decode(payload)
-        self.set_walls(update.get("walls", []), update.get("removed", []))
+        update = MapUpdate.from_map(decode(payload))
+        self.set_walls(update.walls, update.removed)
 
     def _walls_near(self, position: Array) -> list[WallLine]:
         """Walls with a part within the matcher's range of a position."""

@@ -13,98 +13,15 @@ import bisect
 import math
 import threading
 from collections import deque
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
-from wallmap.common.codec import MessageError
+from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
 from wallmap.common.messages import Observations, Pose
 
 POSES_KEPT = 256  # recent poses, to place each observation with the pose nearest its stamp
-
-
-def _finite_array(value: Any, shape: tuple[int, ...], name: str) -> list[Any]:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as err:
-        msg = f"wall field {name!r} is not numeric"
-        raise MessageError(msg) from err
-    if arr.shape != shape or not np.isfinite(arr).all():
-        msg = f"wall field {name!r} must be finite numbers of shape {shape}"
-        raise MessageError(msg)
-    return arr.tolist()
-
-
-def _int(record: dict[str, Any], name: str, default: int | None = None) -> int:
-    value = record.get(name, default)
-    if isinstance(value, bool) or not isinstance(value, int):
-        msg = f"wall field {name!r} must be an integer"
-        raise MessageError(msg)
-    return value
-
-
-def wall_record(record: Any) -> dict[str, Any]:
-    """Check a wall record of the map reply or an update; keep the fields the page uses.
-
-    Anything the page could not draw (a missing field, a non-finite number, which JSON cannot
-    carry) raises MessageError, so one bad record never reaches the browser.
-    """
-    if not isinstance(record, dict):
-        msg = f"wall record is a {type(record).__name__}, not a map"
-        raise MessageError(msg)
-    try:
-        p0 = _finite_array(record["p0"], (2,), "p0")
-        p1 = _finite_array(record["p1"], (2,), "p1")
-        u, v = _finite_array([record["u"], record["v"]], (2,), "u, v")
-        cov = _finite_array(record["cov"], (2, 2), "cov")
-    except KeyError as err:
-        msg = f"wall record lacks {err}"
-        raise MessageError(msg) from None
-    segments = record.get("segments") or [[p0, p1]]
-    if not isinstance(segments, list):
-        msg = "wall field 'segments' must be a list"
-        raise MessageError(msg)
-    tentative = record.get("tentative", False)
-    if not isinstance(tentative, bool):
-        msg = "wall field 'tentative' must be true or false"
-        raise MessageError(msg)
-    return {
-        "id": _int(record, "id"),
-        "u": u,
-        "v": v,
-        "cov": cov,
-        "p0": p0,
-        "p1": p1,
-        "segments": _finite_array(segments, (len(segments), 2, 2), "segments"),
-        "n_obs": _int(record, "n_obs"),
-        "n_views": _int(record, "n_views", 0),
-        "tentative": tentative,
-    }
-
-
-def _list(message: dict[str, Any], name: str) -> list[Any]:
-    value = message.get(name, [])
-    if not isinstance(value, list):
-        msg = f"field {name!r} must be a list"
-        raise MessageError(msg)
-    return value
-
-
-def _counts(message: dict[str, Any]) -> dict[str, Any]:
-    """The map's counters in a reply or update, checked: JSON has no NaN."""
-    counts = {k: message[k] for k in ("frames", "observations", "stamp") if k in message}
-    for name, value in counts.items():
-        number = isinstance(value, int | float) and not isinstance(value, bool)
-        if not (value is None and name == "stamp") and not (number and math.isfinite(value)):
-            msg = f"field {name!r} must be a finite number"
-            raise MessageError(msg)
-    return counts
-
-
-def _trajectory(rows: Any) -> list[list[float]]:
-    if not rows:
-        return []
-    return _finite_array(rows, (len(rows), 4), "trajectory")
 
 
 def _pose_json(pose: Pose) -> dict[str, float]:
@@ -117,7 +34,7 @@ class LiveMap:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.version = 0
-        self._walls: dict[int, dict[str, Any]] = {}
+        self._walls: dict[int, WallRecord] = {}
         self._changed: dict[int, int] = {}  # wall id -> version of its last change
         self._removed: dict[int, int] = {}  # wall id -> version it went at
         self._trajectory: list[list[float]] = []
@@ -130,15 +47,11 @@ class LiveMap:
 
     # --- feeding -----------------------------------------------------------------------------
 
-    def replace(self, reply: dict[str, Any]) -> None:
-        """Take a whole map reply (with ``tentative=true``): walls not in it are gone.
-
-        Raises:
-            MessageError: a malformed reply; the map is left as it was.
-        """
-        walls = {w["id"]: w for w in map(wall_record, _list(reply, "walls"))}
-        trajectory = _trajectory(reply.get("trajectory"))
-        counts = _counts(reply)
+    def replace(self, reply: MapReply) -> None:
+        """Take a whole map reply (with ``tentative=true``): walls not in it are gone."""
+        walls = {w.id: w for w in reply.walls}
+        trajectory = [list(p) for p in reply.trajectory or ()]
+        counts = {"frames": reply.frames, "observations": reply.observations, "stamp": reply.stamp}
         with self._lock:
             version = self.version + 1
             changed = self._store(walls.values(), version)
@@ -154,27 +67,19 @@ class LiveMap:
             if changed:
                 self.version = version
 
-    def apply_update(self, update: dict[str, Any]) -> bool:
+    def apply_update(self, update: MapUpdate) -> bool:
         """Fold in a ``map/updates`` message; False when it predates the last full reply.
 
         An update queued while a full query ran can be older than that reply; applying it would
         put back walls as they were, so it is skipped (its changes are in the reply already).
-
-        Raises:
-            MessageError: a malformed update; the map is left as it was.
         """
-        walls = [wall_record(w) for w in _list(update, "walls")]
-        removed = _list(update, "removed")
-        counts = _counts(update)
-        if not all(isinstance(i, int) for i in removed):
-            msg = "update field 'removed' must be a list of wall ids"
-            raise MessageError(msg)
+        counts = {"frames": update.frames, "stamp": update.stamp}
         with self._lock:
-            if counts.get("frames", self._reply_frames) < self._reply_frames:
+            if update.frames < self._reply_frames:
                 return False
             version = self.version + 1
-            changed = self._store(walls, version)
-            for wall_id in removed:
+            changed = self._store(update.walls, version)
+            for wall_id in update.removed:
                 if wall_id in self._walls:
                     self._drop(wall_id, version)
                     changed = True
@@ -202,13 +107,13 @@ class LiveMap:
         with self._lock:
             self._status = status
 
-    def _store(self, walls: Any, version: int) -> bool:
+    def _store(self, walls: Iterable[WallRecord], version: int) -> bool:
         changed = False
         for wall in walls:
-            if self._walls.get(wall["id"]) != wall:
-                self._walls[wall["id"]] = wall
-                self._changed[wall["id"]] = version
-                self._removed.pop(wall["id"], None)  # a restarted mapper reuses ids
+            if self._walls.get(wall.id) != wall:
+                self._walls[wall.id] = wall
+                self._changed[wall.id] = version
+                self._removed.pop(wall.id, None)  # a restarted mapper reuses ids
                 changed = True
         return changed
 
@@ -233,10 +138,10 @@ class LiveMap:
         with self._lock:
             full = since <= 0 or since > self.version
             if full:
-                walls = list(self._walls.values())
+                walls = [w.to_map() for w in self._walls.values()]
                 removed: list[int] = []
             else:
-                walls = [self._walls[i] for i, v in self._changed.items() if v > since]
+                walls = [self._walls[i].to_map() for i, v in self._changed.items() if v > since]
                 removed = [i for i, v in self._removed.items() if v > since]
             body: dict[str, Any] = {
                 "version": self.version,

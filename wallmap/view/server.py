@@ -28,7 +28,8 @@ from urllib.parse import parse_qs, urlsplit
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import QueryError, fetch_map
+from wallmap.common.map_query import MalformedReplyError, MapQuery, QueryError, fetch_map
+from wallmap.common.map_records import MapReply, MapUpdate
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import (
@@ -173,7 +174,7 @@ class Feed:
                 self._stats.refuse(str(sample.key_expr), str(err))
 
     def _update(self, payload: bytes) -> None:
-        self._live.apply_update(decode(payload))
+        self._live.apply_update(MapUpdate.from_map(decode(payload)))
 
     def _pose(self, payload: bytes) -> None:
         self._live.add_pose(unpack_pose(payload))
@@ -183,22 +184,17 @@ class Feed:
 
     def _query_loop(self) -> None:
         for reply in self._replies():
-            try:
-                self._live.replace(reply)
-            except MessageError as err:
-                self._stats.refuse(self._keys.map_walls, str(err))
+            self._live.replace(reply)
 
-    def _replies(self) -> Iterator[dict[str, Any]]:
+    def _replies(self) -> Iterator[MapReply]:
         """The whole map now and every REQUERY_PERIOD seconds; the page shows why when not."""
         while not self._stop.is_set():
             try:
-                reply = fetch_map(
-                    self._session,
-                    self._keys,
-                    timeout=QUERY_TIMEOUT,
-                    trajectory=True,
-                    tentative=True,
-                )
+                query = MapQuery(tentative=True, trajectory=True)
+                reply = fetch_map(self._session, self._keys, query, timeout=QUERY_TIMEOUT)
+            except MalformedReplyError as err:
+                self._stats.refuse(self._keys.map_walls, str(err))
+                self._live.set_status(str(err))
             except QueryError as err:
                 self._live.set_status(str(err))
             else:
