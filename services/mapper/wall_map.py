@@ -324,6 +324,7 @@ class WallMap:
         self.next_id += 1
         return wall
 
+
 def _seen_through(wall: Wall, ends: Array) -> float:
     """Share of a stretch of ``wall``'s line (two map points) that rays crossed repeatedly."""
     gap = wall.extent.along(ends)
