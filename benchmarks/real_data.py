@@ -27,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.map_consistency import (
     MappedWall,
     angle_between,
@@ -36,9 +35,10 @@ from wallmap.common.map_consistency import (
     place_scan,
 )
 from wallmap.common.messages import Pose
-from wallmap.common.scene import load_truth, write_scene_bag
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, scan_rows
 from wallmap.plot import write_picture
+from wallmap.scene import load_truth, write_scene_bag
 from wallmap.services.mapper.wall_map import MapQuery
 from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player.bag_source import BagSource

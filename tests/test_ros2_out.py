@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.map_client import fetch_map
+from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import ros2_out
 
 MARKERS = "visualization_msgs/msg/MarkerArray"

@@ -20,7 +20,7 @@ from wallmap.common.scan_matching import (
     WallLine,
     register_to_walls,
 )
-from wallmap.common.scene import (
+from wallmap.scene import (
     FloorPlan,
     Scanner,
     Trajectory,

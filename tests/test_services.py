@@ -10,7 +10,6 @@ import pytest
 import zenoh
 
 from wallmap.common.codec import decode
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import (
     Keys,
     TransportError,
@@ -20,6 +19,7 @@ from wallmap.common.transport import (
     open_session,
     settings_from_args,
 )
+from wallmap.scene import write_scene_bag
 
 
 @pytest.fixture(scope="module")

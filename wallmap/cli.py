@@ -21,7 +21,6 @@ from wallmap.common.history import History
 from wallmap.common.ransac import RansacParams
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
     DEFAULT_CONNECT,
@@ -39,6 +38,7 @@ from wallmap.foxglove_cli import add_commands as add_foxglove_commands
 from wallmap.launcher import LaunchError, UpOptions, demo, up
 from wallmap.map_client import QueryError, fetch_map, format_table, to_json
 from wallmap.plot import write_picture
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.detector import service as detector_service
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.mapper import service as mapper_service

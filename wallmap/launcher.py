@@ -19,13 +19,13 @@ from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.history import History
 from wallmap.common.runtime import stop_on_signals
-from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.evaluation import evaluate_map
 from wallmap.map_client import fetch_map, format_table, to_json
 from wallmap.plot import write_picture
+from wallmap.scene import load_truth
 from wallmap.services.player.sources import SourceOptions
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from wallmap.common.scene.floorplan import FloorPlan, Wall
+from wallmap.scene.floorplan import FloorPlan, Wall
 
 _EPS = 1e-9
 

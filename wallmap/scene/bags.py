@@ -32,8 +32,8 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from wallmap.common.scene.floorplan import FloorPlan, generate_floorplan
-from wallmap.common.scene.render import (
+from wallmap.scene.floorplan import FloorPlan, generate_floorplan
+from wallmap.scene.render import (
     Camera,
     Scanner,
     depth_to_points,
@@ -42,7 +42,7 @@ from wallmap.common.scene.render import (
     scan_walls_seen,
     walls_seen,
 )
-from wallmap.common.scene.trajectory import Trajectory, drifting_odometry, generate_trajectory
+from wallmap.scene.trajectory import Trajectory, drifting_odometry, generate_trajectory
 
 BagFormat = Literal["ros1", "ros2-mcap", "ros2-sqlite3"]
 SensorKind = Literal["pointcloud", "depth16", "depth32", "laserscan"]

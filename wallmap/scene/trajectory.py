@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from wallmap.common.scene.floorplan import FloorPlan, smooth_route
+from wallmap.scene.floorplan import FloorPlan, smooth_route
 
 _RAMP_S = 1.0  # time to accelerate from rest to cruise speed (and to stop again)
 

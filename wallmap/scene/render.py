@@ -13,7 +13,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from wallmap.common.scene.floorplan import FloorPlan, Point, Wall, point_segment_distance
+from wallmap.scene.floorplan import FloorPlan, Point, Wall, point_segment_distance
 
 # Optical frame (z forward, x right, y down) expressed in camera_link (x forward, z up).
 R_LINK_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
