@@ -32,9 +32,9 @@ from wallmap.common.map_consistency import (
     angle_between,
     distance_to_walls,
     duplicates,
-    place_scan,
 )
 from wallmap.common.messages import Pose
+from wallmap.common.se2 import transform_points
 from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, scan_rows
 from wallmap.plot import write_picture
@@ -69,7 +69,10 @@ def real_bags(out: Path | None) -> None:
             walls = [MappedWall.from_reply(w) for w in reply["walls"]]
             placed = {p.stamp: (p.x, p.y, p.yaw) for p in poses}
             distance = np.concatenate(
-                [distance_to_walls(place_scan(xy, placed[t]), walls) for t, xy in scan_rows(bag)]
+                [
+                    distance_to_walls(transform_points(xy, placed[t]), walls)
+                    for t, xy in scan_rows(bag)
+                ]
             )
             longest = sorted(walls, key=lambda w: -w.length)[:2]
             angle = angle_between(*longest) if len(longest) == 2 else math.nan
