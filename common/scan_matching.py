@@ -327,12 +327,7 @@ class ScanMatcher:
         dt = stamp - self._stamp
         if dt <= 0:
             return self._reject(self._pose, stamp, "stamp not after the previous scan")
-        # Constant velocity per scan period, not per second: a lidar turns at a constant rate
-        # while its stamps jitter (+-10 % on hallway.bag), and the stamps' jitter made a worse
-        # map. Dropped scans are bridged by whole periods.
-        period = dt if math.isnan(self._period) else self._period
-        periods = max(1, round(dt / period))
-        self._period = period + config.period_smoothing * (dt / periods - period)
+        periods = self._periods(dt)
         prediction = self._pose @ se2.matrix(self._step * periods)
         if len(usable) < config.min_points:
             return self._reject(prediction, stamp, f"only {len(usable)} valid points")
@@ -343,15 +338,39 @@ class ScanMatcher:
         if n_found < config.min_points:
             return self._reject(prediction, stamp, f"only {n_found} points matched", matched, fit)
         step = se2.from_matrix(se2.invert_matrix(self._pose) @ fit.transform)
+        reason = self._beyond_gate(step, dt)
+        if reason:
+            return self._reject(prediction, stamp, reason, matched, fit)
+        return self._accept(usable, fit, step / periods, stamp, matched)
+
+    def _periods(self, dt: float) -> int:
+        """Whole scan periods in ``dt`` (at least one), and the smoothed period updated.
+
+        Constant velocity per scan period, not per second: a lidar turns at a constant rate
+        while its stamps jitter (+-10 % on hallway.bag), and the stamps' jitter made a worse
+        map. Dropped scans are bridged by whole periods.
+        """
+        period = dt if math.isnan(self._period) else self._period
+        periods = max(1, round(dt / period))
+        self._period = period + self.config.period_smoothing * (dt / periods - period)
+        return periods
+
+    def _beyond_gate(self, step: Array, dt: float) -> str | None:
+        """Why a step is faster than the robot can move in ``dt``, or None if it is not."""
         distance, turn = math.hypot(step[0], step[1]), abs(step[2])
-        if distance > config.max_speed * dt or turn > config.max_turn_rate * dt:
-            reason = (
+        if distance > self.config.max_speed * dt or turn > self.config.max_turn_rate * dt:
+            return (
                 f"step of {distance:.2f} m and {math.degrees(turn):.1f} deg in {dt:.3f} s "
                 "is beyond the gate"
             )
-            return self._reject(prediction, stamp, reason, matched, fit)
+        return None
 
-        self._pose, self._step, self._stamp = fit.transform, step / periods, stamp
+    def _accept(
+        self, usable: Array, fit: _Fit, step: Array, stamp: float, matched: float
+    ) -> Registration:
+        """Move to the fit, keep its step per period, and make a keyframe if far enough."""
+        config = self.config
+        self._pose, self._step, self._stamp = fit.transform, step, stamp
         from_keyframe = se2.from_matrix(se2.invert_matrix(self._keyframe_pose) @ fit.transform)
         keyframe = (
             math.hypot(from_keyframe[0], from_keyframe[1]) > config.keyframe_distance
@@ -469,44 +488,97 @@ def register_to_walls(
     if not walls or len(usable) == 0:
         return x0.copy(), np.linalg.inv(information), 0
 
-    normal = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
-    length = np.linalg.norm(normal, axis=1)
-    normal /= length[:, None]
-    offset = np.array([w.offset for w in walls], dtype=float) / length
-    start = np.array([w.p0 for w in walls], dtype=float).reshape(-1, 2)
-    span = np.array([w.p1 for w in walls], dtype=float).reshape(-1, 2) - start
-    span2 = np.einsum("ij,ij->i", span, span)
-    weight = 1.0 / config.point_sigma**2
-
+    lines = _WallArrays.of(walls)
     x = x0.copy()
     matched = 0
     for iteration in range(1, config.iterations + 1):
         rotated = se2.rotate_points(usable, x[2])
-        moved = rotated + x[:2]
-        distance = moved @ normal.T - offset  # (N, W) signed point-to-line distances
-        along = ((moved[:, None, :] - start[None]) * span[None]).sum(axis=-1) / span2
         reach = (
             config.max_distance
             if iteration <= config.coarse_iterations
             else config.fine_max_distance
         )
-        candidate = np.where((along >= 0) & (along <= 1), np.abs(distance), np.inf)
-        wall = candidate.argmin(axis=1)
-        rows = np.arange(len(usable))
-        found = candidate[rows, wall] < reach
+        distance, wall, found = lines.nearest(rotated + x[:2], reach)
         matched = int(np.count_nonzero(found))
-        n = normal[wall[found]]
-        residual = distance[rows, wall][found]
-        q = rotated[found]
-        # d(n . (R p + t)) / d(x, y, yaw) = (n, n . perp(R p)) with perp(v) = (-v_y, v_x)
-        jacobian = np.column_stack([n, n[:, 1] * q[:, 0] - n[:, 0] * q[:, 1]])
-        weighted = jacobian * (weight * _huber_weights(residual, config.huber))[:, None]
         deviation = x - x0
         deviation[2] = se2.wrap(deviation[2])
-        information = weighted.T @ jacobian + prior
-        step = -np.linalg.solve(information, weighted.T @ residual + prior @ deviation)
+        step, information = _wall_step(
+            rotated[found], lines.normal[wall[found]], distance[found], deviation, prior, config
+        )
         x += step
         if np.abs(step).max() < config.convergence:
             break
     x[2] = se2.wrap(x[2])
     return x, np.linalg.inv(information), matched
+
+
+@dataclass(frozen=True)
+class _WallArrays:
+    """Walls as arrays, so that every scan point is compared with every wall at once.
+
+    Attributes:
+        normal: (W, 2) unit normals.
+        offset: (W,) the lines' offsets along their normals.
+        start: (W, 2) the first end of each wall.
+        span: (W, 2) from the first end to the second.
+        span2: (W,) the squared lengths.
+    """
+
+    normal: Array
+    offset: Array
+    start: Array
+    span: Array
+    span2: Array
+
+    @classmethod
+    def of(cls, walls: Sequence[WallLine]) -> _WallArrays:
+        """The arrays of some walls, their normals made unit length."""
+        normal = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
+        length = np.linalg.norm(normal, axis=1)
+        normal /= length[:, None]
+        offset = np.array([w.offset for w in walls], dtype=float) / length
+        start = np.array([w.p0 for w in walls], dtype=float).reshape(-1, 2)
+        span = np.array([w.p1 for w in walls], dtype=float).reshape(-1, 2) - start
+        return cls(normal, offset, start, span, np.einsum("ij,ij->i", span, span))
+
+    def nearest(self, moved: Array, reach: float) -> tuple[Array, Array, Array]:
+        """Per map point (N, 2): the signed distance to its wall, the wall, and if it matched.
+
+        A point's wall is the nearest one its projection falls within; it matches when that
+        wall is nearer than ``reach``.
+        """
+        distance = moved @ self.normal.T - self.offset  # (N, W) signed point-to-line distances
+        along = ((moved[:, None, :] - self.start[None]) * self.span[None]).sum(axis=-1) / self.span2
+        candidate = np.where((along >= 0) & (along <= 1), np.abs(distance), np.inf)
+        wall = candidate.argmin(axis=1)
+        rows = np.arange(len(moved))
+        return distance[rows, wall], wall, candidate[rows, wall] < reach
+
+
+def _wall_step(
+    rotated: Array,
+    normal: Array,
+    residual: Array,
+    deviation: Array,
+    prior: Array,
+    config: MatcherConfig,
+) -> tuple[Array, Array]:
+    """One Gauss-Newton step of the matched points' distances plus the prior, and its information.
+
+    Args:
+        rotated: The matched scan points turned by the pose's yaw, ``R p`` (M, 2).
+        normal: Their walls' unit normals (M, 2).
+        residual: Their signed distances to their walls (M,).
+        deviation: The pose minus the guess, heading wrapped (3,).
+        prior: The guess's information (3, 3).
+        config: The point sigma and the Huber threshold.
+    """
+    # d(n . (R p + t)) / d(x, y, yaw) = (n, n . perp(R p)) with perp(v) = (-v_y, v_x)
+    jacobian = np.column_stack(
+        [normal, normal[:, 1] * rotated[:, 0] - normal[:, 0] * rotated[:, 1]]
+    )
+    weight = 1.0 / config.point_sigma**2
+    weighted = jacobian * (weight * _huber_weights(residual, config.huber))[:, None]
+    information = weighted.T @ jacobian + prior
+    step = -np.linalg.solve(information, weighted.T @ residual + prior @ deviation)
+    return step, information
