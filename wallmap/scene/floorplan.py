@@ -77,10 +77,9 @@ class Furniture:
 
     def corners(self) -> np.ndarray:
         """Footprint corners, (4, 2), counter-clockwise."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
         hw, hd = self.size[0] / 2, self.size[1] / 2
         local = np.array([[-hw, -hd], [hw, -hd], [hw, hd], [-hw, hd]])
-        return local @ np.array([[c, s], [-s, c]]) + np.asarray(self.center)
+        return se2.transform_points(local, (*self.center, self.yaw))
 
 
 @dataclass(frozen=True)
@@ -190,10 +189,7 @@ def segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.nda
 
 
 def _inside_box(points: np.ndarray, box: Furniture) -> np.ndarray:
-    c, s = math.cos(box.yaw), math.sin(box.yaw)
-    rel = points - np.asarray(box.center)
-    lx = rel[:, 0] * c + rel[:, 1] * s
-    ly = -rel[:, 0] * s + rel[:, 1] * c
+    lx, ly = se2.unrotate((points - np.asarray(box.center)).T, box.yaw)  # in the box's frame
     return (np.abs(lx) <= box.size[0] / 2) & (np.abs(ly) <= box.size[1] / 2)
 
 
@@ -816,10 +812,10 @@ def junction_plan(seed: int) -> FloorPlan:
     route = [(-4.5, depth - 1.2), (-3.5, 1.2), (-1.2, middle), (1.2, middle), (3.5, 1.2),
              (4.5, depth - 1.2)]  # fmt: skip
     angle = float(rng.uniform(-math.pi, math.pi))
-    c, s = math.cos(angle), math.sin(angle)
 
     def turn(p: Sequence[float]) -> Point:
-        return (c * p[0] - s * p[1], s * p[0] + c * p[1])
+        x, y = se2.rotate(p, angle).tolist()
+        return (x, y)
 
     walls = tuple(Wall(i, turn(p), turn(q), height=height) for i, (p, q) in enumerate(segments))
     return FloorPlan(walls, (), height, tuple(turn(p) for p in route))
