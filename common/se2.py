@@ -5,9 +5,10 @@ axis, in radians. It also names the frame it places: ``pose`` maps points of tha
 parent (``p_parent = R(yaw) p + (x, y)``). The same pose as a 3x3 homogeneous matrix is
 :func:`matrix`; the vector form is what filters estimate, the matrix form chains frames.
 
-Pure functions over numpy arrays. They are written in scalars where the map calls them for every
-observation (``math.cos`` on a float costs a fraction of ``np.cos``), and each keeps the exact
-arithmetic of the code it replaced, so that results are unchanged to the last bit.
+Pure functions over numpy arrays, in scalars where the map calls them for every observation
+(``math.cos`` on a float costs a fraction of ``np.cos``). :func:`rotate` and :func:`unrotate` also
+take whole trajectories, column-wise. The planar model's own hot loops (``common.wall_model``)
+keep their rotations inline in floats and follow the same conventions.
 """
 
 from __future__ import annotations
