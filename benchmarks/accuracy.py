@@ -1,6 +1,6 @@
 """Mapping accuracy per kind of scene, with true poses and with drifting odometry.
 
-Each scene kind (see ``wallmap.common.scene.SCENE_KINDS``) is generated for every seed,
+Each scene kind (see ``wallmap.scene.SCENE_KINDS``) is generated for every seed,
 recorded as a ROS 1 bag of 16-bit depth images, mapped in one process by the real detector
 and mapper (``wallmap.offline.map_bag``) and scored against its ground truth. The seeds
 default to 500-502, away from the ones the detector and mapper were tuned on (1-9) and
@@ -24,8 +24,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-from wallmap.common.evaluation import MapScore, evaluate_map
-from wallmap.common.scene import (
+from wallmap.config import configured
+from wallmap.evaluation import MapScore, evaluate_map
+from wallmap.offline import map_bag, walls
+from wallmap.scene import (
     SCENE_KINDS,
     FloorPlan,
     SceneInfo,
@@ -33,8 +35,6 @@ from wallmap.common.scene import (
     truth_path_for,
     write_scene_bag,
 )
-from wallmap.config import configured
-from wallmap.offline import map_bag, walls
 
 POSE_SOURCES = ("tf", "odom", "slam")
 HEADER = """\
@@ -50,7 +50,7 @@ One row per scene kind and pose source, summed or taken the median over the seed
   end pt     median end-point error of the best matches, cm (median over the seeds)
   mapped     walls served (offline.walls: confirmed ones) / true walls required for recall
   frames     depth frames mapped (summed); s: seconds spent mapping them (summed)
-A match is within 5 deg and 15 cm; see wallmap/common/evaluation.py for the rules."""
+A match is within 5 deg and 15 cm; see wallmap/evaluation.py for the rules."""
 
 
 @dataclass(frozen=True)

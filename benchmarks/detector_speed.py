@@ -19,7 +19,7 @@ from sklearn.linear_model import RANSACRegressor
 
 from wallmap.common.ransac import RansacParams, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
-from wallmap.common.scene import (
+from wallmap.scene import (
     Camera,
     depth_to_points,
     generate_floorplan,

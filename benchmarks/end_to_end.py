@@ -21,8 +21,8 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader
 
-from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.launcher import free_loopback_port
+from wallmap.scene import Camera, write_scene_bag
 
 
 def read_clouds(bag: Path) -> float:

@@ -21,7 +21,7 @@ import numpy as np
 
 from wallmap.common import ekf
 from wallmap.common.messages import Frame
-from wallmap.common.scene import write_scene_bag
+from wallmap.scene import write_scene_bag
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper import wall_map as wall_map_module
 from wallmap.services.mapper.wall_map import WallMap

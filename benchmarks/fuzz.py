@@ -9,7 +9,7 @@ import argparse
 import time
 import warnings
 
-from wallmap.common.fuzzing import fuzz
+from wallmap.fuzzing import fuzz
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from wallmap.common import wall_model
+from wallmap.common import se2
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.pose_correction import PoseCorrector
 from wallmap.services.mapper.wall_map import WallMap
@@ -36,7 +36,7 @@ def observe(
     a: np.ndarray, b: np.ndarray, pose: np.ndarray, rng: np.random.Generator
 ) -> WallObservation:
     """The detector's view of wall a-b from pose, with 1 cm noise."""
-    rot = wall_model.rotation(pose[2])
+    rot = se2.rotation(pose[2])
     d = (b - a) / np.linalg.norm(b - a)
     foot = a + ((pose[:2] - a) @ d) * d
     z = rot.T @ (foot - pose[:2]) + rng.normal(0, 0.01, 2)

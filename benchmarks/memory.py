@@ -16,8 +16,8 @@ import tempfile
 import threading
 from pathlib import Path
 
-from wallmap.common.scene import write_scene_bag
 from wallmap.launcher import free_loopback_port
+from wallmap.scene import write_scene_bag
 
 
 def rss_mb(pid: int) -> float:

@@ -27,20 +27,20 @@ from pathlib import Path
 
 import numpy as np
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.map_consistency import (
     MappedWall,
     angle_between,
     distance_to_walls,
     duplicates,
-    place_scan,
 )
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Pose
-from wallmap.common.scene import load_truth, write_scene_bag
+from wallmap.common.se2 import transform_points
 from wallmap.config import configured
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, scan_rows
 from wallmap.plot import write_picture
+from wallmap.scene import load_truth, write_scene_bag
 from wallmap.services.mapper import serving
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
@@ -71,7 +71,10 @@ def real_bags(out: Path | None) -> None:
             walls = [MappedWall.from_reply(w) for w in reply.walls]
             placed = {p.stamp: (p.x, p.y, p.yaw) for p in poses}
             distance = np.concatenate(
-                [distance_to_walls(place_scan(xy, placed[t]), walls) for t, xy in scan_rows(bag)]
+                [
+                    distance_to_walls(transform_points(xy, placed[t]), walls)
+                    for t, xy in scan_rows(bag)
+                ]
             )
             longest = sorted(walls, key=lambda w: -w.length)[:2]
             angle = angle_between(*longest) if len(longest) == 2 else math.nan

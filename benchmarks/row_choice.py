@@ -13,11 +13,11 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.config import Config
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.detector.detector import DetectorConfig
 
 CHOICES = {

@@ -1,9 +1,9 @@
 """What a map of a real recording can be checked against when there is no ground truth. Pure.
 
 A real bag has no plan to score against, but the map and the poses still have to agree with the
-data: scan points placed with the published poses should lie on mapped walls; no wall should be
-mapped twice; a straight corridor should come out as two long parallel walls. These are the
-checks of ``docs/real-data.md`` and of the real-bag tests.
+data: scan points placed with the published poses (``se2.transform_points``) should lie on
+mapped walls; no wall should be mapped twice; a straight corridor should come out as two long
+parallel walls. These are the checks of ``docs/real-data.md`` and of the real-bag tests.
 """
 
 from __future__ import annotations
@@ -61,13 +61,6 @@ def distance_to_walls(points: Array, walls: Sequence[MappedWall]) -> Array:
         nearest = a + t[..., None] * d
         best[start : start + 4096] = np.linalg.norm(p - nearest, axis=2).min(axis=1)
     return best
-
-
-def place_scan(points: Array, pose: Sequence[float]) -> Array:
-    """Base-frame points (N x 2) placed in the map by a pose (x, y, yaw)."""
-    x, y, yaw = pose
-    c, s = math.cos(yaw), math.sin(yaw)
-    return points @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 
 
 def _overlap(a: MappedWall, b: MappedWall) -> float:

@@ -225,7 +225,7 @@ class Frame:
     stamp: float
     frame_id: str
     points: NDArray[np.float32]
-    base_from_sensor: Array
+    T_base_sensor: Array  # on the wire: base_from_sensor (docs/protocol.md)
     sensor: str = "depth"
     lossless: bool = False
     band: tuple[float, float] | None = None
@@ -238,7 +238,7 @@ class Frame:
             "stamp": self.stamp,
             "frame_id": self.frame_id,
             "points": self.points,
-            "base_from_sensor": self.base_from_sensor,
+            "base_from_sensor": self.T_base_sensor,
             "sensor": self.sensor,
             "lossless": self.lossless,
             **({} if self.band is None else {"band": list(self.band)}),
@@ -261,7 +261,7 @@ class Frame:
             stamp=_finite(m, "stamp"),
             frame_id=_str(m, "frame_id"),
             points=points,
-            base_from_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
+            T_base_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
             sensor=_sensor(m),
             lossless=_flag(m, "lossless"),
             band=_band(m),

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common import se2
+
 Array = NDArray[np.float64]
 Quaternion = tuple[float, float, float, float]
 Vector3 = tuple[float, float, float]
@@ -102,8 +104,10 @@ def pose_matrix(x: float, y: float, z: float, roll: float, pitch: float, yaw: fl
 
 def planar_matrix(x: float, y: float, yaw: float) -> Array:
     """The 4x4 transform of a pose on the floor: position (x, y, 0), heading yaw about z."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    out = np.eye(4)
+    out[:2, :2] = se2.rotation(yaw)
+    out[:2, 3] = (x, y)
+    return out
 
 
 def invert(matrix: Array) -> Array:

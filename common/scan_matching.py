@@ -8,9 +8,10 @@ residuals let a scan slide along a wall where point-to-point would pull it onto 
 sample; and the prior is what keeps a featureless corridor, where the scan constrains nothing
 along the walls, from sliding or spiking.
 
-Poses are (x, y, yaw); as 3x3 homogeneous matrices internally, so that composing them is one
-product. Solver increments are applied on the right, ``T = T @ se2(d)``: they live in the sensor
-frame, where the Jacobian of a point is simplest and independent of where the odometry frame is.
+Poses are (x, y, yaw); as 3x3 homogeneous matrices internally (``common.se2``), so that composing
+them is one product. Solver increments are applied on the right, ``T = T @ se2.matrix(d)``: they
+live in the sensor frame, where the Jacobian of a point is simplest and independent of where the
+odometry frame is.
 
 :func:`register_to_walls` is the other half: refining a pose against walls already in the map,
 so that a corridor's walls remove the drift across it while the pose's own prior keeps what the
@@ -25,9 +26,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-Array = NDArray[np.float64]
+from wallmap.common import se2
+from wallmap.common.se2 import Array
 
 _BIAS = 1 << 30  # grid indices are shifted by this so that keys are non-negative
 _NEIGHBOURS = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], dtype=np.int64)
@@ -170,36 +172,8 @@ class WallLine:
         return cls(normal, float(normal @ a), a, b)
 
 
-def _se2(x: float, y: float, yaw: float) -> Array:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def _pose_of(t: Array) -> Array:
-    return np.array([t[0, 2], t[1, 2], math.atan2(t[1, 0], t[0, 0])])
-
-
-def _inverse(t: Array) -> Array:
-    r = t[:2, :2]
-    out = np.eye(3)
-    out[:2, :2] = r.T
-    out[:2, 2] = -r.T @ t[:2, 2]
-    return out
-
-
-def _wrap(angle: float) -> float:
-    return math.remainder(angle, 2 * math.pi)
-
-
 def _huber_weights(residuals: Array, k: float) -> Array:
     return k / np.maximum(np.abs(residuals), k)
-
-
-def _to_frame(cov: Array, yaw: float) -> Array:
-    """A covariance of sensor-frame increments, rotated into the frame the pose lives in."""
-    a = np.eye(3)
-    a[:2, :2] = _se2(0.0, 0.0, yaw)[:2, :2]
-    return a @ cov @ a.T
 
 
 def _usable_points(points: ArrayLike, config: MatcherConfig) -> Array:
@@ -278,7 +252,7 @@ class _Fit:
 def _align(local_map: _LocalMap, points: Array, prediction: Array, config: MatcherConfig) -> _Fit:
     """Point-to-line Gauss-Newton from the prediction, with the prediction as a prior."""
     prior = config.prior_weight * np.array([1.0, 1.0, config.rotation_scale**2])
-    to_prediction = _inverse(prediction)
+    to_prediction = se2.invert_matrix(prediction)
     t = prediction.copy()
     information = np.diag(prior + _REGULARISER)  # what is left if nothing matches
     for iteration in range(1, config.iterations + 1):
@@ -299,9 +273,9 @@ def _align(local_map: _LocalMap, points: Array, prediction: Array, config: Match
         )
         weighted = jacobian * _huber_weights(residual, config.huber)[:, None]
         information = weighted.T @ jacobian + np.diag(prior + _REGULARISER)
-        deviation = _pose_of(to_prediction @ t)  # where the prior pulls back from
+        deviation = se2.from_matrix(to_prediction @ t)  # where the prior pulls back from
         step = -np.linalg.solve(information, weighted.T @ residual + prior * deviation)
-        t = t @ _se2(*step)
+        t = t @ se2.matrix(step)
         if np.abs(step).max() < config.convergence:
             break
     return _Fit(t, information, found, iteration)
@@ -353,13 +327,8 @@ class ScanMatcher:
         dt = stamp - self._stamp
         if dt <= 0:
             return self._reject(self._pose, stamp, "stamp not after the previous scan")
-        # Constant velocity per scan period, not per second: a lidar turns at a constant rate
-        # while its stamps jitter (+-10 % on hallway.bag), and the stamps' jitter made a worse
-        # map. Dropped scans are bridged by whole periods.
-        period = dt if math.isnan(self._period) else self._period
-        periods = max(1, round(dt / period))
-        self._period = period + config.period_smoothing * (dt / periods - period)
-        prediction = self._pose @ _se2(*(self._step * periods))
+        periods = self._periods(dt)
+        prediction = self._pose @ se2.matrix(self._step * periods)
         if len(usable) < config.min_points:
             return self._reject(prediction, stamp, f"only {len(usable)} valid points")
 
@@ -368,28 +337,52 @@ class ScanMatcher:
         matched = n_found / len(usable)
         if n_found < config.min_points:
             return self._reject(prediction, stamp, f"only {n_found} points matched", matched, fit)
-        step = _pose_of(_inverse(self._pose) @ fit.transform)
+        step = se2.from_matrix(se2.invert_matrix(self._pose) @ fit.transform)
+        reason = self._beyond_gate(step, dt)
+        if reason:
+            return self._reject(prediction, stamp, reason, matched, fit)
+        return self._accept(usable, fit, step / periods, stamp, matched)
+
+    def _periods(self, dt: float) -> int:
+        """Whole scan periods in ``dt`` (at least one), and the smoothed period updated.
+
+        Constant velocity per scan period, not per second: a lidar turns at a constant rate
+        while its stamps jitter (+-10 % on hallway.bag), and the stamps' jitter made a worse
+        map. Dropped scans are bridged by whole periods.
+        """
+        period = dt if math.isnan(self._period) else self._period
+        periods = max(1, round(dt / period))
+        self._period = period + self.config.period_smoothing * (dt / periods - period)
+        return periods
+
+    def _beyond_gate(self, step: Array, dt: float) -> str | None:
+        """Why a step is faster than the robot can move in ``dt``, or None if it is not."""
         distance, turn = math.hypot(step[0], step[1]), abs(step[2])
-        if distance > config.max_speed * dt or turn > config.max_turn_rate * dt:
-            reason = (
+        if distance > self.config.max_speed * dt or turn > self.config.max_turn_rate * dt:
+            return (
                 f"step of {distance:.2f} m and {math.degrees(turn):.1f} deg in {dt:.3f} s "
                 "is beyond the gate"
             )
-            return self._reject(prediction, stamp, reason, matched, fit)
+        return None
 
-        self._pose, self._step, self._stamp = fit.transform, step / periods, stamp
-        from_keyframe = _pose_of(_inverse(self._keyframe_pose) @ fit.transform)
+    def _accept(
+        self, usable: Array, fit: _Fit, step: Array, stamp: float, matched: float
+    ) -> Registration:
+        """Move to the fit, keep its step per period, and make a keyframe if far enough."""
+        config = self.config
+        self._pose, self._step, self._stamp = fit.transform, step, stamp
+        from_keyframe = se2.from_matrix(se2.invert_matrix(self._keyframe_pose) @ fit.transform)
         keyframe = (
             math.hypot(from_keyframe[0], from_keyframe[1]) > config.keyframe_distance
             or abs(from_keyframe[2]) > config.keyframe_angle
         )
         if keyframe:
             self._add_keyframe(usable)
-        pose = _pose_of(fit.transform)
+        pose = se2.from_matrix(fit.transform)
         cov = config.point_sigma**2 * np.linalg.inv(fit.information)
         return Registration(
             _frozen(pose),
-            _frozen(_to_frame(cov, pose[2])),
+            _frozen(se2.rotate_covariance(cov, pose[2])),
             matched,
             fit.iterations,
             accepted=True,
@@ -433,7 +426,7 @@ class ScanMatcher:
         config = self.config
         self._pose = prediction
         self._stamp = max(self._stamp, stamp)
-        pose = _pose_of(prediction)
+        pose = se2.from_matrix(prediction)
         prior_cov = (
             config.point_sigma**2
             / max(config.prior_weight, _REGULARISER)
@@ -441,7 +434,7 @@ class ScanMatcher:
         )
         return Registration(
             _frozen(pose),
-            _frozen(_to_frame(prior_cov, pose[2])),
+            _frozen(se2.rotate_covariance(prior_cov, pose[2])),
             matched,
             0 if fit is None else fit.iterations,
             accepted=False,
@@ -495,45 +488,97 @@ def register_to_walls(
     if not walls or len(usable) == 0:
         return x0.copy(), np.linalg.inv(information), 0
 
-    normal = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
-    length = np.linalg.norm(normal, axis=1)
-    normal /= length[:, None]
-    offset = np.array([w.offset for w in walls], dtype=float) / length
-    start = np.array([w.p0 for w in walls], dtype=float).reshape(-1, 2)
-    span = np.array([w.p1 for w in walls], dtype=float).reshape(-1, 2) - start
-    span2 = np.einsum("ij,ij->i", span, span)
-    weight = 1.0 / config.point_sigma**2
-
+    lines = _WallArrays.of(walls)
     x = x0.copy()
     matched = 0
     for iteration in range(1, config.iterations + 1):
-        c, s = math.cos(x[2]), math.sin(x[2])
-        rotated = usable @ np.array([[c, s], [-s, c]])  # R p, row-wise
-        moved = rotated + x[:2]
-        distance = moved @ normal.T - offset  # (N, W) signed point-to-line distances
-        along = ((moved[:, None, :] - start[None]) * span[None]).sum(axis=-1) / span2
+        rotated = se2.rotate_points(usable, x[2])
         reach = (
             config.max_distance
             if iteration <= config.coarse_iterations
             else config.fine_max_distance
         )
-        candidate = np.where((along >= 0) & (along <= 1), np.abs(distance), np.inf)
-        wall = candidate.argmin(axis=1)
-        rows = np.arange(len(usable))
-        found = candidate[rows, wall] < reach
+        distance, wall, found = lines.nearest(rotated + x[:2], reach)
         matched = int(np.count_nonzero(found))
-        n = normal[wall[found]]
-        residual = distance[rows, wall][found]
-        q = rotated[found]
-        # d(n . (R p + t)) / d(x, y, yaw) = (n, n . perp(R p)) with perp(v) = (-v_y, v_x)
-        jacobian = np.column_stack([n, n[:, 1] * q[:, 0] - n[:, 0] * q[:, 1]])
-        weighted = jacobian * (weight * _huber_weights(residual, config.huber))[:, None]
         deviation = x - x0
-        deviation[2] = _wrap(deviation[2])
-        information = weighted.T @ jacobian + prior
-        step = -np.linalg.solve(information, weighted.T @ residual + prior @ deviation)
+        deviation[2] = se2.wrap(deviation[2])
+        step, information = _wall_step(
+            rotated[found], lines.normal[wall[found]], distance[found], deviation, prior, config
+        )
         x += step
         if np.abs(step).max() < config.convergence:
             break
-    x[2] = _wrap(x[2])
+    x[2] = se2.wrap(x[2])
     return x, np.linalg.inv(information), matched
+
+
+@dataclass(frozen=True)
+class _WallArrays:
+    """Walls as arrays, so that every scan point is compared with every wall at once.
+
+    Attributes:
+        normal: (W, 2) unit normals.
+        offset: (W,) the lines' offsets along their normals.
+        start: (W, 2) the first end of each wall.
+        span: (W, 2) from the first end to the second.
+        span2: (W,) the squared lengths.
+    """
+
+    normal: Array
+    offset: Array
+    start: Array
+    span: Array
+    span2: Array
+
+    @classmethod
+    def of(cls, walls: Sequence[WallLine]) -> _WallArrays:
+        """The arrays of some walls, their normals made unit length."""
+        normal = np.array([w.normal for w in walls], dtype=float).reshape(-1, 2)
+        length = np.linalg.norm(normal, axis=1)
+        normal /= length[:, None]
+        offset = np.array([w.offset for w in walls], dtype=float) / length
+        start = np.array([w.p0 for w in walls], dtype=float).reshape(-1, 2)
+        span = np.array([w.p1 for w in walls], dtype=float).reshape(-1, 2) - start
+        return cls(normal, offset, start, span, np.einsum("ij,ij->i", span, span))
+
+    def nearest(self, moved: Array, reach: float) -> tuple[Array, Array, Array]:
+        """Per map point (N, 2): the signed distance to its wall, the wall, and if it matched.
+
+        A point's wall is the nearest one its projection falls within; it matches when that
+        wall is nearer than ``reach``.
+        """
+        distance = moved @ self.normal.T - self.offset  # (N, W) signed point-to-line distances
+        along = ((moved[:, None, :] - self.start[None]) * self.span[None]).sum(axis=-1) / self.span2
+        candidate = np.where((along >= 0) & (along <= 1), np.abs(distance), np.inf)
+        wall = candidate.argmin(axis=1)
+        rows = np.arange(len(moved))
+        return distance[rows, wall], wall, candidate[rows, wall] < reach
+
+
+def _wall_step(
+    rotated: Array,
+    normal: Array,
+    residual: Array,
+    deviation: Array,
+    prior: Array,
+    config: MatcherConfig,
+) -> tuple[Array, Array]:
+    """One Gauss-Newton step of the matched points' distances plus the prior, and its information.
+
+    Args:
+        rotated: The matched scan points turned by the pose's yaw, ``R p`` (M, 2).
+        normal: Their walls' unit normals (M, 2).
+        residual: Their signed distances to their walls (M,).
+        deviation: The pose minus the guess, heading wrapped (3,).
+        prior: The guess's information (3, 3).
+        config: The point sigma and the Huber threshold.
+    """
+    # d(n . (R p + t)) / d(x, y, yaw) = (n, n . perp(R p)) with perp(v) = (-v_y, v_x)
+    jacobian = np.column_stack(
+        [normal, normal[:, 1] * rotated[:, 0] - normal[:, 0] * rotated[:, 1]]
+    )
+    weight = 1.0 / config.point_sigma**2
+    weighted = jacobian * (weight * _huber_weights(residual, config.huber))[:, None]
+    information = weighted.T @ jacobian + prior
+    step = -np.linalg.solve(information, weighted.T @ residual + prior @ deviation)
+    return step, information

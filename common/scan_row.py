@@ -104,15 +104,15 @@ def auto_band(heights: Array, default: tuple[float, float] = DEFAULT_BAND) -> tu
     return round(low, 2), round(high, 2)
 
 
-def to_base_xy(points: NDArray[np.float32], base_from_sensor: Array) -> Array:
+def to_base_xy(points: NDArray[np.float32], T_base_sensor: Array) -> Array:
     """Sensor-frame points (..., 3) as base-frame floor positions (..., 2), NaN where none."""
-    xy = points.astype(np.float64) @ base_from_sensor[:2, :3].T + base_from_sensor[:2, 3]
+    xy = points.astype(np.float64) @ T_base_sensor[:2, :3].T + T_base_sensor[:2, 3]
     xy[~np.isfinite(xy).all(axis=-1)] = np.nan
     return xy
 
 
-def _heights(points: NDArray[np.float32], base_from_sensor: Array) -> NDArray[np.float32]:
-    a, b, c, d = base_from_sensor[2].astype(np.float32)
+def _heights(points: NDArray[np.float32], T_base_sensor: Array) -> NDArray[np.float32]:
+    a, b, c, d = T_base_sensor[2].astype(np.float32)
     # Per axis rather than a matrix product: the player hands a strided view over the message.
     height = points[..., 0] * a
     height += points[..., 1] * b
@@ -122,7 +122,7 @@ def _heights(points: NDArray[np.float32], base_from_sensor: Array) -> NDArray[np
 
 
 def band_stack(
-    points: NDArray[np.float32], base_from_sensor: Array, band: tuple[float, float]
+    points: NDArray[np.float32], T_base_sensor: Array, band: tuple[float, float]
 ) -> NDArray[np.float32]:
     """Per column, the points nearest ``STACK`` heights spread over the band: (STACK, w, 3).
 
@@ -130,7 +130,7 @@ def band_stack(
     """
     low, high = band
     spacing = (high - low) / STACK
-    height = _heights(points, base_from_sensor)
+    height = _heights(points, T_base_sensor)
     columns = np.arange(points.shape[1])
     stack = np.full((STACK, points.shape[1], 3), np.nan, dtype=np.float32)
     for level in range(STACK):
@@ -143,7 +143,7 @@ def band_stack(
     return stack
 
 
-def upright_points(stack: NDArray[np.float32], base_from_sensor: Array) -> NDArray[np.float32]:
+def upright_points(stack: NDArray[np.float32], T_base_sensor: Array) -> NDArray[np.float32]:
     """Per column, the stack's point on something that rises through the band; NaN if none.
 
     A point's rise is the spread of heights of all stack points (every column's) standing on
@@ -156,8 +156,8 @@ def upright_points(stack: NDArray[np.float32], base_from_sensor: Array) -> NDArr
     one nearest the band's middle.
     """
     levels, width = stack.shape[:2]
-    height = _heights(stack, base_from_sensor).astype(np.float64)
-    xy = to_base_xy(stack, base_from_sensor)
+    height = _heights(stack, T_base_sensor).astype(np.float64)
+    xy = to_base_xy(stack, T_base_sensor)
     valid = np.isfinite(height) & np.isfinite(xy).all(axis=-1)
     rise = np.zeros((levels, width))
     top = np.full((levels, width), -np.inf)
@@ -228,7 +228,7 @@ def rows_to_search(how: RowSelection, height: int) -> slice:
 
 def pick_points(
     searched: NDArray[np.float32],
-    base_from_sensor: Array,
+    T_base_sensor: Array,
     band: tuple[float, float],
 ) -> NDArray[np.float32]:
     """What a player sends of the rows ``rows_to_search`` chose: the band's stack, or the row.
@@ -237,22 +237,22 @@ def pick_points(
     """
     if searched.shape[0] == 1:
         return searched
-    return band_stack(searched, base_from_sensor, band)
+    return band_stack(searched, T_base_sensor, band)
 
 
 def frame_band(
-    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection
+    points: NDArray[np.float32], T_base_sensor: Array, how: RowSelection
 ) -> tuple[float, float]:
     """The band for a whole cloud: the selection's, or what this frame's sensor sees."""
     if how.band is not None:
         return how.band
     searched = points[rows_to_search(how, points.shape[0])]
-    return auto_band(_heights(searched, base_from_sensor).ravel().astype(np.float64))
+    return auto_band(_heights(searched, T_base_sensor).ravel().astype(np.float64))
 
 
 def frame_stack(
     points: NDArray[np.float32],
-    base_from_sensor: Array,
+    T_base_sensor: Array,
     how: RowSelection,
     stacked: bool = False,
 ) -> NDArray[np.float32]:
@@ -263,32 +263,32 @@ def frame_stack(
     """
     if points.shape[0] == 1 or stacked:
         return points
-    band = frame_band(points, base_from_sensor, how)
-    return pick_points(points[rows_to_search(how, points.shape[0])], base_from_sensor, band)
+    band = frame_band(points, T_base_sensor, how)
+    return pick_points(points[rows_to_search(how, points.shape[0])], T_base_sensor, band)
 
 
 def select_points(
     points: NDArray[np.float32],
-    base_from_sensor: Array,
+    T_base_sensor: Array,
     how: RowSelection,
     stacked: bool = False,
 ) -> NDArray[np.float32]:
     """The scan row (columns x 3, sensor frame, NaN for no point) from a frame's points."""
-    stack = frame_stack(points, base_from_sensor, how, stacked)
-    return stack[0] if stack.shape[0] == 1 else upright_points(stack, base_from_sensor)
+    stack = frame_stack(points, T_base_sensor, how, stacked)
+    return stack[0] if stack.shape[0] == 1 else upright_points(stack, T_base_sensor)
 
 
 MAX_FREE_RAYS = 64  # rays a frame reports as free space
 
 
-def free_rays(stack: NDArray[np.float32], base_from_sensor: Array) -> tuple[Array, Array]:
+def free_rays(stack: NDArray[np.float32], T_base_sensor: Array) -> tuple[Array, Array]:
     """Where some of the sensor's rays in the band ended: its position and (n, 2) ends.
 
     Per sampled column the farthest return of the stack, in the base frame: the space from
     the sensor to it is free at some height of the band, whatever stands nearer below it.
     """
-    origin = base_from_sensor[:2, 3].astype(np.float64)
-    xy = to_base_xy(stack, base_from_sensor)
+    origin = T_base_sensor[:2, 3].astype(np.float64)
+    xy = to_base_xy(stack, T_base_sensor)
     reach = np.linalg.norm(xy - origin, axis=-1)
     reach[~np.isfinite(reach)] = -1.0
     farthest = np.argmax(reach, axis=0)
@@ -300,7 +300,7 @@ def free_rays(stack: NDArray[np.float32], base_from_sensor: Array) -> tuple[Arra
 
 
 def select_scan(
-    points: NDArray[np.float32], base_from_sensor: Array, how: RowSelection, stacked: bool = False
+    points: NDArray[np.float32], T_base_sensor: Array, how: RowSelection, stacked: bool = False
 ) -> Array:
     """The scan row as 2-D points in the base frame (columns x 2, NaN for no point)."""
-    return to_base_xy(select_points(points, base_from_sensor, how, stacked), base_from_sensor)
+    return to_base_xy(select_points(points, T_base_sensor, how, stacked), T_base_sensor)

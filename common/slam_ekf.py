@@ -20,7 +20,7 @@ is taken off every step before it can accumulate.
 
 Pure functions over numpy arrays: ``x`` is the state vector, ``p`` its covariance; wall ``i``
 is ``x[5 + 2 i : 7 + 2 i]``. The Jacobians are those of ``common.wall_model`` and
-``common.pose_ekf``, each tested against numeric differentiation.
+``common.se2``, each tested against numeric differentiation.
 """
 
 from __future__ import annotations
@@ -30,11 +30,43 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wallmap.common import ekf, pose_ekf, wall_model
-from wallmap.common.pose_ekf import Array, OdometryNoise
+from wallmap.common import ekf, se2, wall_model
+from wallmap.common.se2 import Array
 
 POSE = 3  # state entries of the pose
 ROBOT = 5  # ...and of the odometry's calibration after it
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """How uncertain a step of odometry is: standard deviations that grow with the motion.
+
+    Odometry enters as relative motion, ``step = se2.between(odom_prev, odom)``: where it
+    thinks the robot is drifts without bound, its steps do not. The calibration in the state
+    takes the systematic part of a step's error off; this is what is left, random per step.
+
+    Attributes:
+        per_metre: Position error per metre driven (0.05 = 5 %: a wheel's scale error and slip).
+        turn_per_radian: Heading error per radian turned.
+        turn_per_metre: Heading error per metre driven (rad/m: a yaw bias).
+        floor_xy: Position noise every step (m), so a robot standing still is never certain.
+        floor_yaw: Heading noise every step (rad).
+    """
+
+    per_metre: float = 0.05
+    turn_per_radian: float = 0.05
+    turn_per_metre: float = math.radians(3.0)
+    floor_xy: float = 0.002
+    floor_yaw: float = math.radians(0.05)
+
+    def covariance(self, step: Array) -> Array:
+        """The covariance of one odometry step (x, y, yaw in the robot's frame)."""
+        distance = math.hypot(step[0], step[1])
+        sigma_xy = self.per_metre * distance + self.floor_xy
+        sigma_yaw = (
+            self.turn_per_radian * abs(step[2]) + self.turn_per_metre * distance + self.floor_yaw
+        )
+        return np.diag([sigma_xy**2, sigma_xy**2, sigma_yaw**2])
 
 
 def wall_slice(slot: int) -> slice:
@@ -72,12 +104,12 @@ def predict(
     bias may change, so that a calibration that varies with the floor is followed.
     """
     motion = calibrated(step, x[POSE:ROBOT])
-    ja, jb = pose_ekf.compose_jacobians(x[:POSE], motion)
+    ja, jb = se2.compose_jacobians(x[:POSE], motion)
     f = np.eye(ROBOT)
     f[:POSE, :POSE] = ja
     f[:POSE, POSE:] = jb @ calibrated_jacobian(step)
     x_new = x.copy()
-    x_new[:POSE] = pose_ekf.compose(x[:POSE], motion)
+    x_new[:POSE] = se2.compose(x[:POSE], motion)
     p_new = p.copy()
     p_new[:ROBOT, :] = f @ p[:ROBOT, :]
     p_new[:, :ROBOT] = p_new[:, :ROBOT] @ f.T
@@ -138,7 +170,7 @@ def update(x: Array, p: Array, innov: JointInnovation) -> tuple[Array, Array]:
     pht = p[:, cols] @ innov.jacobian.T
     gain = pht @ ekf.inverse_and_det(innov.cov)[0]
     x_new = x + gain @ innov.residual
-    x_new[2] = pose_ekf.wrap(float(x_new[2]))
+    x_new[2] = se2.wrap(float(x_new[2]))
     p_new = p - gain @ pht.T
     return x_new, 0.5 * (p_new + p_new.T)
 

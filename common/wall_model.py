@@ -27,17 +27,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+from wallmap.common.se2 import Array, rotation
 
 _PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # rotates a vector by +90 degrees
-
-
-def rotation(yaw: float) -> Array:
-    """Return the 2-D rotation matrix of ``yaw`` radians."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s], [s, c]])
 
 
 def _terms(
@@ -45,8 +38,8 @@ def _terms(
 ) -> tuple[float, float, float, float, float, float, float]:
     """Scalars shared by the model and its Jacobians: k, |s|^2, s.d, cos, sin, and R^T s.
 
-    Written out in scalars: these run for every candidate wall of every observation, where
-    numpy's per-call cost on 2-vectors would dominate.
+    Written out in scalars (``R^T s`` as in ``common.se2``, inline): these run for every
+    candidate wall of every observation, where numpy's per-call cost on 2-vectors would dominate.
     """
     sx, sy = float(s[0]), float(s[1])
     dx, dy = float(pose[0]) - float(anchor[0]), float(pose[1]) - float(anchor[1])

@@ -112,5 +112,5 @@ class Pipeline:
 
     def _track(self, frame: Frame) -> Pose:
         assert self.tracker is not None
-        scan = select_scan(frame.points, frame.base_from_sensor, self.rows, frame.band is not None)
+        scan = select_scan(frame.points, frame.T_base_sensor, self.rows, frame.band is not None)
         return self.tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp).pose

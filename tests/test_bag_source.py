@@ -15,8 +15,8 @@ from rosbags.typesys.store import Typestore
 
 from wallmap.common.messages import Pose
 from wallmap.common.scan_row import STACK, RowSelection, rows_to_search, select_points
-from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import transform_matrix
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.pose_sources import (

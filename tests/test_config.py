@@ -13,10 +13,10 @@ from conftest import free_port, run_wallmap
 
 from wallmap.common import config_file
 from wallmap.common.config_file import ConfigError
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import TransportError
 from wallmap.config import Config, configured, resolve, to_toml
 from wallmap.offline import map_bag, walls
+from wallmap.scene import write_scene_bag
 
 
 @pytest.fixture(scope="module")

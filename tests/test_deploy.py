@@ -20,8 +20,8 @@ import pytest
 import yaml
 from conftest import free_port, run_wallmap, wait_for_port
 
-from wallmap.common.evaluation import evaluate_map
-from wallmap.common.scene import load_truth, write_scene_bag
+from wallmap.evaluation import evaluate_map
+from wallmap.scene import load_truth, write_scene_bag
 
 pytestmark = pytest.mark.e2e
 

@@ -14,11 +14,11 @@ from conftest import REAL_DATA
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.cli import main as wallmap_main
-from wallmap.common.scene import write_scene_bag
 from wallmap.doctor import add_command, render_text, report_json
 from wallmap.doctor_facts import Report
 from wallmap.doctor_inspect import inspect_bag
 from wallmap.options import given
+from wallmap.scene import write_scene_bag
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from wallmap.common.evaluation import evaluate_map, mapped_line, physical_walls
-from wallmap.common.scene import FloorPlan, Wall, generate_floorplan
+from wallmap.evaluation import evaluate_map, mapped_line, physical_walls
+from wallmap.scene import FloorPlan, Wall, generate_floorplan
 
 
 def as_mapped(p0, p1, wall_id=None):

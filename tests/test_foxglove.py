@@ -25,7 +25,7 @@ import pytest
 from conftest import Service, Stack, free_port, wait_for_port
 
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.common.scene import write_scene_bag
+from wallmap.scene import write_scene_bag
 
 RECORD = [sys.executable, "-m", "wallmap"]
 SCHEMAS = {

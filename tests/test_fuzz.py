@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from wallmap.common.codec import MAX_PAYLOAD_BYTES, MessageError, decode
-from wallmap.common.fuzzing import fuzz, samples
+from wallmap.fuzzing import fuzz, samples
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -16,11 +16,11 @@ import pytest
 from conftest import free_port, run_wallmap
 from PIL import Image
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.map_consistency import MappedWall, fans
-from wallmap.common.scene import SCENE_KINDS, Camera, Handheld, write_handheld_recording
 from wallmap.config import configured
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.scene import SCENE_KINDS, Camera, Handheld, write_handheld_recording
 from wallmap.services.player.tum_folder import read_depth_png
 
 SEED = 41

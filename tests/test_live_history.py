@@ -14,9 +14,9 @@ import time
 import pytest
 from test_recovery import assert_same_walls
 
-from wallmap.common.evaluation import evaluate_map
-from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.scene import Camera, write_scene_bag
 
 pytestmark = pytest.mark.e2e
 

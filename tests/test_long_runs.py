@@ -19,8 +19,8 @@ import time
 import pytest
 from conftest import assert_clean_exit, free_port
 
-from wallmap.common.evaluation import evaluate_map
-from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.evaluation import evaluate_map
+from wallmap.scene import Camera, write_scene_bag
 
 pytestmark = pytest.mark.e2e
 

@@ -7,7 +7,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.scene import Camera, write_scene_bag
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from wallmap.common.codec import MessageError
-from wallmap.common.evaluation import MapScore, evaluate_map
 from wallmap.common.map_records import WallRecord
-from wallmap.common.scene import load_truth, write_scene_bag
 from wallmap.config import configured
+from wallmap.evaluation import MapScore, evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.scene import load_truth, write_scene_bag
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker, wall_lines
 
 N_FRAMES = 300

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wallmap.common import wall_model
+from wallmap.common import se2
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import serving
@@ -27,7 +27,7 @@ def reply(wall_map, query=None) -> dict:
 
 def seen(wall, pose) -> WallObservation:
     """A wall (two map points) as the detector would report it from ``pose`` (x, y, yaw)."""
-    rot = wall_model.rotation(pose[2])
+    rot = se2.rotation(pose[2])
     a, b = (rot.T @ (np.array(p, float) - pose[:2]) for p in wall)
     d = (b - a) / np.linalg.norm(b - a)
     closest = a - (a @ d) * d + RNG.normal(0, NOISE, 2)
@@ -40,7 +40,7 @@ def drive(wall_map: WallMap, frames, start: int = 0) -> None:
         pose = np.asarray(where, float)
         rays = None
         if ends is not None:
-            rot = wall_model.rotation(pose[2])
+            rot = se2.rotation(pose[2])
             rays = (np.asarray(ends, float) - pose[:2]) @ rot
         wall_map.integrate(
             Observations("r", i, float(i), "base_link", [seen(w, pose) for w in walls],

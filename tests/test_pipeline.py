@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wallmap.common.evaluation import evaluate_map
-from wallmap.common.scene import SCENE_KINDS, write_scene_bag
+from wallmap.evaluation import evaluate_map
+from wallmap.scene import SCENE_KINDS, write_scene_bag
 
 pytestmark = pytest.mark.e2e
 

@@ -11,8 +11,8 @@ import pytest
 import zenoh
 
 from wallmap.common.codec import decode
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.scene import write_scene_bag
 from wallmap.services.player.playback import Playback
 
 N_FRAMES = 60  # 4 s of bag at 15 Hz

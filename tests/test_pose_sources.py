@@ -18,9 +18,9 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from wallmap.common.evaluation import MapScore, evaluate_map
-from wallmap.common.scene import write_scene_bag, write_tum
 from wallmap.common.transport import ZenohSettings, open_session
+from wallmap.evaluation import MapScore, evaluate_map
+from wallmap.scene import write_scene_bag, write_tum
 
 pytestmark = pytest.mark.e2e
 

@@ -76,7 +76,7 @@ def test_ransac_splits_collinear_walls_across_a_doorway():
 
 
 def camera_on_base(height=1.0, pitch=0.0):
-    """base_from_sensor for an optical frame (z forward, x right, y down) at `height`."""
+    """T_base_sensor for an optical frame (z forward, x right, y down) at `height`."""
     optical = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)
     c, s = np.cos(pitch), np.sin(pitch)
     tilt = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # pitch about base y (nose down > 0)
@@ -87,7 +87,7 @@ def camera_on_base(height=1.0, pitch=0.0):
 
 
 def test_band_scan_takes_points_inside_the_height_band_per_column():
-    base_from_sensor = camera_on_base()
+    T_base_sensor = camera_on_base()
     rows = np.linspace(-1.5, 1.5, 7)  # optical y (down) at 3 m: heights 2.5 .. -0.5 above camera
     cols = np.linspace(-1, 1, 5)
     pts = np.zeros((7, 5, 3), np.float32)
@@ -95,11 +95,11 @@ def test_band_scan_takes_points_inside_the_height_band_per_column():
     pts[..., 1] = rows[:, None]
     pts[..., 2] = 3.0
     pts[3, 2] = np.nan  # the centre pixel has no return
-    xy = select_scan(pts, base_from_sensor, RowSelection(band=(1.3, 2.1)))
+    xy = select_scan(pts, T_base_sensor, RowSelection(band=(1.3, 2.1)))
     # Heights are 1 - y: rows with y in [-1.1, -0.3] qualify: y = -0.5 (height 1.5), -1.0 (2.0).
     assert np.allclose(xy[:, 0], 3.1)
     np.testing.assert_allclose(xy[:, 1], -cols)
-    one_row = select_scan(pts, base_from_sensor, RowSelection(mode="row", row_fraction=0.5))
+    one_row = select_scan(pts, T_base_sensor, RowSelection(mode="row", row_fraction=0.5))
     assert np.isnan(one_row[2]).all()
     assert np.isfinite(one_row[[0, 1, 3, 4]]).all()
 

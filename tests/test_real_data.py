@@ -19,9 +19,9 @@ from wallmap.common.map_consistency import (
     angle_between,
     distance_to_walls,
     duplicates,
-    place_scan,
 )
 from wallmap.common.messages import unpack_pose
+from wallmap.common.se2 import transform_points
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.offline import scan_rows
 
@@ -69,7 +69,7 @@ def test_scan_only_bag_maps_with_scan_matching(stack, name: str) -> None:
     assert reply["frames"] >= 0.95 * len(scans), "scans integrated"
     assert len(poses) == len(scans), "one pose per scan"
     distances = np.concatenate(
-        [distance_to_walls(place_scan(xy, poses[stamp]), walls) for stamp, xy in scans]
+        [distance_to_walls(transform_points(xy, poses[stamp]), walls) for stamp, xy in scans]
     )
     on_walls = float(np.mean(distances <= 0.05))
     print(f"{name}: {len(walls)} walls, {on_walls:.1%} of scan points within 5 cm of one")

@@ -15,9 +15,9 @@ import zenoh
 
 from wallmap.common.codec import decode
 from wallmap.common.messages import Frame, pack
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.offline import map_bag, walls
+from wallmap.scene import write_scene_bag
 
 N_FRAMES = 300
 

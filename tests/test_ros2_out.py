@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from wallmap.common.map_query import fetch_map
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import ros2_out
 
 MARKERS = "visualization_msgs/msg/MarkerArray"

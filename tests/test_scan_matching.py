@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from wallmap.common import se2
 from wallmap.common.scan_matching import (
     MatcherConfig,
     Registration,
@@ -20,7 +21,7 @@ from wallmap.common.scan_matching import (
     WallLine,
     register_to_walls,
 )
-from wallmap.common.scene import (
+from wallmap.scene import (
     FloorPlan,
     Scanner,
     Trajectory,
@@ -41,19 +42,6 @@ CORRIDOR_ANGLE = 0.5  # the straight corridor's axis, radians from the map's x a
 CORRIDOR_AXIS = np.array([math.cos(CORRIDOR_ANGLE), math.sin(CORRIDOR_ANGLE)])
 
 
-def se2(x: float, y: float, yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def pose_of(t: np.ndarray) -> np.ndarray:
-    return np.array([t[0, 2], t[1, 2], math.atan2(t[1, 0], t[0, 0])])
-
-
-def angle_diff(a: float, b: float) -> float:
-    return math.remainder(a - b, 2 * math.pi)
-
-
 def base_points(plan: FloorPlan, pose, scanner: Scanner, rng) -> np.ndarray:
     """A rendered scan as (N, 2) base-frame points, NaN rows where a beam got no return."""
     ranges, _ = render_scan(plan, *pose, scanner, rng)
@@ -64,7 +52,7 @@ def base_points(plan: FloorPlan, pose, scanner: Scanner, rng) -> np.ndarray:
 def straight_corridor(length: float, half_width: float = 1.1) -> FloorPlan:
     """Two parallel walls closed at both ends, nothing else: along it only the ends tell."""
     corners = [(0.0, -half_width), (length, -half_width), (length, half_width), (0.0, half_width)]
-    rot = se2(0.0, 0.0, CORRIDOR_ANGLE)[:2, :2]
+    rot = se2.rotation(CORRIDOR_ANGLE)
     c = [tuple(rot @ p) for p in corners]
     walls = tuple(Wall(i, c[i], c[(i + 1) % 4]) for i in range(4))
     return FloorPlan(walls=walls, route=(tuple(rot @ (1.5, 0.0)), tuple(rot @ (length - 1.5, 0.0))))
@@ -86,12 +74,12 @@ class Drive:
 
     def yaw_errors_deg(self) -> np.ndarray:
         return np.degrees(
-            [angle_diff(e, t) for e, t in zip(self.estimate[:, 2], self.truth[:, 2], strict=True)]
+            [se2.wrap(e - t) for e, t in zip(self.estimate[:, 2], self.truth[:, 2], strict=True)]
         )
 
     def to_odometry(self, v: np.ndarray) -> np.ndarray:
         """A map-frame direction in the odometry frame."""
-        return se2(*self.traj.pose_at(0))[:2, :2].T @ v
+        return se2.matrix(self.traj.pose_at(0))[:2, :2].T @ v
 
 
 def drive(
@@ -103,13 +91,13 @@ def drive(
 ) -> Drive:
     rng = np.random.default_rng(seed)
     matcher = ScanMatcher(config)
-    start_inv = np.linalg.inv(se2(*traj.pose_at(0)))
+    start_inv = se2.invert_matrix(se2.matrix(traj.pose_at(0)))
     regs, truth = [], []
     for i in range(len(traj)):
         regs.append(
             matcher.update(base_points(plan, traj.pose_at(i), scanner, rng), traj.stamps[i])
         )
-        truth.append(pose_of(start_inv @ se2(*traj.pose_at(i))))
+        truth.append(se2.from_matrix(start_inv @ se2.matrix(traj.pose_at(i))))
     return Drive(regs, np.array(truth), traj)
 
 
@@ -246,18 +234,18 @@ def test_step_gate_rejects_a_jump_and_the_odometry_goes_on(rooms_scene):
     plan, traj = rooms_scene
     rng = np.random.default_rng(3)
     matcher = warmed_up(plan, traj, 100, rng)
-    start_inv = np.linalg.inv(se2(*traj.pose_at(0)))
+    start_inv = se2.invert_matrix(se2.matrix(traj.pose_at(0)))
     # Scan 108's view at scan 100's time: 0.32 m in 0.1 s, beyond the 2 m/s gate.
     jump = matcher.update(base_points(plan, traj.pose_at(108), SCANNER, rng), traj.stamps[100])
     assert not jump.accepted
     assert "gate" in jump.reason
     assert not jump.keyframe
-    truth = pose_of(start_inv @ se2(*traj.pose_at(100)))
+    truth = se2.from_matrix(start_inv @ se2.matrix(traj.pose_at(100)))
     assert np.linalg.norm(jump.pose[:2] - truth[:2]) < 0.02  # the prediction, near the truth
     for i in range(101, 200):
         reg = matcher.update(base_points(plan, traj.pose_at(i), SCANNER, rng), traj.stamps[i])
         assert reg.accepted
-    truth = pose_of(start_inv @ se2(*traj.pose_at(199)))
+    truth = se2.from_matrix(start_inv @ se2.matrix(traj.pose_at(199)))
     assert np.linalg.norm(reg.pose[:2] - truth[:2]) < 0.02
 
 
@@ -287,7 +275,9 @@ def test_nan_rows_are_ignored(rooms_scene):
         b = without.update(scan[np.isfinite(scan).all(axis=1)], traj.stamps[i])
         assert a.accepted
         np.testing.assert_array_equal(a.pose, b.pose)
-    truth = pose_of(np.linalg.inv(se2(*traj.pose_at(0))) @ se2(*traj.pose_at(39)))
+    truth = se2.from_matrix(
+        se2.invert_matrix(se2.matrix(traj.pose_at(0))) @ se2.matrix(traj.pose_at(39))
+    )
     assert np.linalg.norm(a.pose[:2] - truth[:2]) < 0.02
 
 
@@ -315,7 +305,7 @@ def test_register_to_walls_recovers_a_perturbed_pose_in_a_room(rooms_scene):
     pose, cov, matched = register_to_walls(points, guess, GUESS_COV, walls_of(plan))
     print(f"error {np.linalg.norm(pose[:2] - truth[:2]) * 1000:.2f} mm")
     assert np.linalg.norm(pose[:2] - truth[:2]) < 0.003  # measured 0.45 mm with 1 cm noise
-    assert abs(math.degrees(angle_diff(pose[2], truth[2]))) < 0.05
+    assert abs(math.degrees(se2.wrap(pose[2] - truth[2]))) < 0.05
     assert matched > 0.9 * np.isfinite(points).all(axis=1).sum()
     assert np.sqrt(np.linalg.eigvalsh(cov)).max() < 0.005
     np.testing.assert_array_equal(guess, truth + error)  # the input is left alone
@@ -332,7 +322,7 @@ def test_register_to_walls_in_a_corridor_fixes_only_the_offset_across():
     error = pose[:2] - truth[:2]
     assert matched > 300
     assert abs(error @ across) < 0.003
-    assert abs(math.degrees(angle_diff(pose[2], truth[2]))) < 0.05
+    assert abs(math.degrees(se2.wrap(pose[2] - truth[2]))) < 0.05
     assert abs(error @ CORRIDOR_AXIS - 0.3) < 0.005  # the walls say nothing: the guess stays
     along_var = CORRIDOR_AXIS @ cov[:2, :2] @ CORRIDOR_AXIS
     assert along_var == pytest.approx(GUESS_COV[0, 0], rel=0.05)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from wallmap.common.scene import (
+from wallmap.scene import (
     AMCL_POSE_TOPIC,
     CAMERA_INFO_TOPIC,
     GROUND_TRUTH_TOPIC,
@@ -39,7 +39,7 @@ from wallmap.common.scene import (
     write_scene_bag,
     write_tum,
 )
-from wallmap.common.scene.floorplan import point_segment_distance, segment_distances
+from wallmap.scene.floorplan import point_segment_distance, segment_distances
 
 SEEDS = [0, 1, 2, 3, 11, 42]
 SAMPLE_TRUTH = Path(__file__).parents[1] / "wallmap" / "data" / "sample.bag.truth.json"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wallmap.common import wall_model
+from wallmap.common import se2
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import serving, state_file
@@ -20,7 +20,7 @@ def reply(wall_map, query=None) -> dict:
 
 def seen(wall: tuple[tuple[float, float], tuple[float, float]], pose: np.ndarray):
     """A wall (two map points) as the detector would report it from ``pose`` (x, y, yaw)."""
-    rot = wall_model.rotation(pose[2])
+    rot = se2.rotation(pose[2])
     a, b = (rot.T @ (np.array(p) - pose[:2]) for p in wall)
     d = (b - a) / np.linalg.norm(b - a)
     closest = a - (a @ d) * d
@@ -29,7 +29,7 @@ def seen(wall: tuple[tuple[float, float], tuple[float, float]], pose: np.ndarray
 
 def rays_to(far_x: float, pose: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """Ray ends in the base frame: the map points (far_x, y) seen from ``pose``."""
-    rot = wall_model.rotation(pose[2])
+    rot = se2.rotation(pose[2])
     return np.array([rot.T @ (np.array([far_x, y]) - pose[:2]) for y in ys])
 
 

@@ -9,13 +9,13 @@ import pytest
 import zenoh
 
 from wallmap.common.codec import decode
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import (
     Keys,
     ZenohSettings,
     make_config,
     open_session,
 )
+from wallmap.scene import write_scene_bag
 
 
 @pytest.fixture(scope="module")

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.messages import unpack_pose
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.config import configured
+from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.scene import write_scene_bag
 
 N_FRAMES = 600
 

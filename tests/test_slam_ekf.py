@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from wallmap.common import pose_ekf, slam_ekf, wall_model
-from wallmap.common.pose_ekf import OdometryNoise
+from wallmap.common import se2, slam_ekf, wall_model
+from wallmap.common.slam_ekf import OdometryNoise
 
 NOISE = OdometryNoise()
 DRIFT = (0.005, math.radians(0.2))
@@ -31,6 +31,15 @@ def _state(rng: np.random.Generator, walls: int = 2) -> tuple[np.ndarray, np.nda
     return x, a @ a.T + 1e-6 * np.eye(len(x))
 
 
+def test_odometry_noise_grows_with_distance_and_turn() -> None:
+    still = NOISE.covariance(np.zeros(3))
+    driven = NOISE.covariance(np.array([1.0, 0.0, 0.0]))
+    turned = NOISE.covariance(np.array([0.0, 0.0, 1.0]))
+    assert np.all(np.diag(driven) > np.diag(still))
+    assert turned[2, 2] > still[2, 2]
+    assert still[0, 0] > 0, "a robot standing still is never certain"
+
+
 def test_calibrated_step_jacobian_matches_numeric_differentiation() -> None:
     rng = np.random.default_rng(5)
     for _ in range(20):
@@ -49,7 +58,7 @@ def test_prediction_moves_the_covariance_with_the_jacobian_of_the_motion() -> No
 
         def move(v: np.ndarray, step=step) -> np.ndarray:
             out = v.copy()
-            out[:3] = pose_ekf.compose(v[:3], slam_ekf.calibrated(step, v[3:5]))
+            out[:3] = se2.compose(v[:3], slam_ekf.calibrated(step, v[3:5]))
             return out
 
         f = _numeric(move, x)
@@ -69,7 +78,7 @@ def test_a_new_wall_carries_the_correlations_of_the_pose_that_saw_it() -> None:
 
     def grown(v: np.ndarray) -> np.ndarray:
         pose, zz = v[:3], v[-2:]
-        t, rot = pose[:2], wall_model.rotation(pose[2])
+        t, rot = pose[:2], se2.rotation(pose[2])
         n = rot @ zz / np.linalg.norm(zz)
         s = (n @ (t - anchor) + np.linalg.norm(zz)) * n  # the line, from the fixed anchor
         return np.concatenate([v[:-2], s])

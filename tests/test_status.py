@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from wallmap.common.scene import write_scene_bag
+from wallmap.scene import write_scene_bag
 
 pytestmark = pytest.mark.e2e
 

@@ -88,9 +88,9 @@ def test_free_rays_end_at_the_farthest_return_of_each_column() -> None:
     def scene(level, column):
         return 2.0 if level < 3 else 4.0
 
-    mount = np.eye(4)
-    mount[:2, 3] = (0.1, 0.0)
-    origin, ends = free_rays(stack_of(scene), mount)
+    T_base_sensor = np.eye(4)
+    T_base_sensor[:2, 3] = (0.1, 0.0)
+    origin, ends = free_rays(stack_of(scene), T_base_sensor)
     np.testing.assert_allclose(origin, (0.1, 0.0))
     assert len(ends) == WIDTH
     np.testing.assert_allclose(ends[:, 0], 4.1)  # shifted by the mount, like every point

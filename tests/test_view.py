@@ -32,8 +32,8 @@ from conftest import Service, Stack, free_port, wait_for_port
 from wallmap.common.codec import MessageError
 from wallmap.common.map_query import fetch_map
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.common.scene import write_scene_bag
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import state_file
 from wallmap.view.live import LiveMap
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from wallmap.common import wall_model
+from wallmap.common import se2
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import serving, state_file
@@ -32,7 +32,7 @@ def reply(wall_map, query=None) -> dict:
 def observe(pose, rng, noise=0.01, max_range=6.0):
     """What the detector would report: visible walls as closest point, covariance, extent."""
     x, y, yaw = pose
-    rot = wall_model.rotation(yaw)
+    rot = se2.rotation(yaw)
     out = []
     for a, b in WALLS:
         p0, p1 = np.array(a), np.array(b)
@@ -112,7 +112,7 @@ def test_observations_with_the_paper_point_model_would_fragment_walls():
     rng = np.random.default_rng(5)
     walls_point_model = []
     for pose in drive(rng):
-        rot = wall_model.rotation(pose[2])
+        rot = se2.rotation(pose[2])
         for obs in observe(pose, rng):
             uv = pose[:2] + rot @ obs.closest  # the paper: a point moved into the map
             if not any(np.linalg.norm(uv - w) < 0.1 for w in walls_point_model):
@@ -313,7 +313,7 @@ def test_a_wall_passing_close_to_the_sensor_is_mapped_as_well_as_any_other():
     for i in range(80):
         y = 0.0 if i < 40 else -0.07 * (i - 40)
         pose = np.array([0.05 * i, y, rng.uniform(-0.3, 0.3)])
-        rot = wall_model.rotation(pose[2])
+        rot = se2.rotation(pose[2])
         z = rot.T @ np.array([0.0, 0.35 - y]) + rng.normal(0, 0.005, 2)
         ends = [rot.T @ (np.array([x, 0.35]) - pose[:2]) for x in (pose[0] - 1.0, pose[0] + 1.5)]
         obs = WallObservation(z, np.eye(2) * 0.005**2, ends[0], ends[1], 40, 0.005)
@@ -354,7 +354,7 @@ def test_a_line_blended_across_a_shallow_corner_is_a_shadow_not_a_wall():
 def seen_from(pose: tuple[float, float, float], a, b) -> WallObservation:
     """A precise observation of the map segment a-b from ``pose``, in the robot frame."""
     x, y, yaw = pose
-    rot = wall_model.rotation(yaw)
+    rot = se2.rotation(yaw)
     pa, pb = rot.T @ (np.asarray(a, float) - [x, y]), rot.T @ (np.asarray(b, float) - [x, y])
     d = (pb - pa) / np.linalg.norm(pb - pa)
     return WallObservation(pa - (pa @ d) * d, np.eye(2) * 1e-6, pa, pb, 40, 0.01)

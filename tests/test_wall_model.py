@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from wallmap.common import ekf, wall_model
+from wallmap.common import ekf, se2, wall_model
 
 
 def closest_point_in_robot_frame(p0, p1, pose):
@@ -12,7 +12,7 @@ def closest_point_in_robot_frame(p0, p1, pose):
     t = np.asarray(pose[:2], float)
     d = (p1 - p0) / np.linalg.norm(p1 - p0)
     foot = p0 + ((t - p0) @ d) * d
-    return wall_model.rotation(pose[2]).T @ (foot - t)
+    return se2.rotation(pose[2]).T @ (foot - t)
 
 
 def wall_from_points(p0, p1, anchor):
@@ -70,7 +70,7 @@ def test_from_observation_inverts_prediction(p0, p1, anchor, pose):
 
     # Jacobians: the state is a function of (z, pose) with the anchor held where it was chosen.
     def state_of(z_, pose_):
-        t, r = pose_[:2], wall_model.rotation(pose_[2])
+        t, r = pose_[:2], se2.rotation(pose_[2])
         n = r @ z_ / np.linalg.norm(z_)
         return (n @ (t - new_anchor) + np.linalg.norm(z_)) * n
 
@@ -112,7 +112,7 @@ def test_driving_along_a_wall_leaves_the_observation_unchanged_unlike_the_point_
         pose = np.array([x, 0.0, 0.0])
         np.testing.assert_allclose(wall_model.predict(s, anchor, pose), [0.0, 2.0], atol=1e-12)
     # The paper's equations move (u, v) as a point: after 3 m they predict (-3, 2), 3 m off.
-    point_model = wall_model.rotation(0.0).T @ (s - np.array([3.0, 0.0]))
+    point_model = se2.rotation(0.0).T @ (s - np.array([3.0, 0.0]))
     np.testing.assert_allclose(point_model, [-3.0, 2.0])
 
 

@@ -21,7 +21,6 @@ from wallmap.arg_types import positive
 from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import setup_logging, stop_on_signals
-from wallmap.common.scene import Camera, write_scene_bag
 from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
     DEFAULT_CONNECT,
@@ -55,6 +54,7 @@ from wallmap.options import (
     given,
 )
 from wallmap.plot import write_picture
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.detector import service as detector_service
 from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import make_pose_input

@@ -42,7 +42,7 @@ from foxglove.messages import (
     Vector3,
 )
 
-from wallmap.common import messages
+from wallmap.common import messages, se2
 from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
 from wallmap.services.mapper.pose_buffer import PoseBuffer
 
@@ -196,11 +196,7 @@ def observations_scene(obs: messages.Observations, pose: messages.Pose) -> Scene
 
     One entity, replaced by the next frame's, so the panel shows what the detector sees now.
     """
-    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-    segments = [
-        [(pose.x + c * px - s * py, pose.y + s * px + c * py) for px, py in (w.p0, w.p1)]
-        for w in obs.walls
-    ]
+    segments = [se2.transform_points((w.p0, w.p1), pose.vector) for w in obs.walls]
     ns = nanoseconds(obs.stamp)
     return SceneUpdate(
         entities=[

@@ -21,14 +21,14 @@ from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
-from wallmap.common.evaluation import evaluate_map
 from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
-from wallmap.common.scene import load_truth
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.config import Config, UpSettings, to_plain, to_toml
+from wallmap.evaluation import evaluate_map
 from wallmap.map_client import format_table, to_json
 from wallmap.plot import write_picture
+from wallmap.scene import load_truth
 from wallmap.services.player.service import PlayerSettings
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM

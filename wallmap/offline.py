@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common.map_consistency import place_scan
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.se2 import transform_points
 from wallmap.config import Config
 from wallmap.services.mapper import serving
 from wallmap.services.mapper.wall_map import WallMap
@@ -101,5 +101,5 @@ def points_at_heights(
             points = points[np.isfinite(points).all(axis=1)]
             base = points @ frame.T_base_sensor[:3, :3].T + frame.T_base_sensor[:3, 3]
             keep = base[(base[:, 2] >= low) & (base[:, 2] <= high), :2]
-            placed.append(place_scan(keep, (pose.x, pose.y, pose.yaw)))
+            placed.append(transform_points(keep, (pose.x, pose.y, pose.yaw)))
     return np.vstack(placed) if placed else np.zeros((0, 2))

@@ -23,8 +23,8 @@ from wallmap.common.pose3d import (
     split_planar,
     transform_matrix,
 )
-from wallmap.common.scene import Camera
-from wallmap.common.scene.bags import (
+from wallmap.scene import Camera
+from wallmap.scene.bags import (
     CAMERA_INFO_TOPIC,
     IMAGE_TOPIC,
     TF_STATIC_TOPIC,

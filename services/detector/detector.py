@@ -80,14 +80,16 @@ class WallDetector:
 
         ``report``, when given, is filled with why (see ``RowReport``).
         """
-        mount = frame.base_from_sensor
+        T_base_sensor = frame.T_base_sensor
         is_scanner = frame.sensor == "scan"
-        stack = frame_stack(frame.points, mount, self.config.rows, stacked=frame.band is not None)
-        row = stack[0] if stack.shape[0] == 1 else upright_points(stack, mount)
-        scan = to_base_xy(row, mount)
+        stack = frame_stack(
+            frame.points, T_base_sensor, self.config.rows, stacked=frame.band is not None
+        )
+        row = stack[0] if stack.shape[0] == 1 else upright_points(stack, T_base_sensor)
+        scan = to_base_xy(row, T_base_sensor)
         # A depth camera's clutter needs telling from walls; a lidar's scan, one height only,
         # does not, and its path stays as it was.
-        origin, rays = (None, None) if is_scanner else free_rays(stack, mount)
+        origin, rays = (None, None) if is_scanner else free_rays(stack, T_base_sensor)
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = replace(base, noise_scale=base.noise_scale * noise.scale)

@@ -14,6 +14,7 @@ import logging
 import math
 from dataclasses import dataclass
 
+from wallmap.common import se2
 from wallmap.common.messages import Pose
 
 log = logging.getLogger("wallmap.mapper")
@@ -48,13 +49,13 @@ class PoseBufferConfig:
 
 def _interpolate(a: Pose, b: Pose, stamp: float) -> Pose:
     f = (stamp - a.stamp) / (b.stamp - a.stamp)
-    dyaw = math.remainder(b.yaw - a.yaw, 2.0 * math.pi)
+    dyaw = se2.wrap(b.yaw - a.yaw)
     nearest = a if f < 0.5 else b
     return Pose(
         stamp=stamp,
         x=a.x + f * (b.x - a.x),
         y=a.y + f * (b.y - a.y),
-        yaw=math.remainder(a.yaw + f * dyaw, 2.0 * math.pi),
+        yaw=se2.wrap(a.yaw + f * dyaw),
         cov=nearest.cov,
         frame=a.frame,
         child=a.child,
@@ -96,7 +97,7 @@ class PoseBuffer:
 
     def _warn_jump(self, last: Pose, pose: Pose) -> None:
         distance = math.hypot(pose.x - last.x, pose.y - last.y)
-        turn = abs(math.remainder(pose.yaw - last.yaw, 2.0 * math.pi))
+        turn = abs(se2.wrap(pose.yaw - last.yaw))
         if distance > self.config.jump_distance or turn > self.config.jump_angle:
             log.warning(
                 "pose jumped by %.2f m and %.1f deg in %.3f s at %.3f",

@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from wallmap.common import ekf, pose_ekf, slam_ekf
+from wallmap.common import ekf, se2, slam_ekf
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.common.pose_ekf import Array, OdometryNoise
+from wallmap.common.se2 import Array
+from wallmap.common.slam_ekf import OdometryNoise
 from wallmap.services.mapper.wall import Wall
 from wallmap.services.mapper.wall_map import WallMap
 
@@ -111,7 +112,7 @@ class PoseCorrector:
         if self.x is None or self.odom is None:
             self.x, self.p = slam_ekf.start(seen, START_COV, cfg.calibration_sd)
         else:
-            step = pose_ekf.between(self.odom, seen)
+            step = se2.between(self.odom, seen)
             self.x, self.p = slam_ekf.predict(
                 self.x, self.p, step, cfg.noise, cfg.calibration_drift
             )
@@ -203,7 +204,7 @@ class PoseCorrector:
         """The map -> odom transform that takes the odometry's pose to the corrected one."""
         if self.x is None or self.odom is None:
             return None
-        c = pose_ekf.compose(self.x[:3], _inverse(self.odom))
+        c = se2.compose(self.x[:3], se2.inverse(self.odom))
         return Pose(stamp, float(c[0]), float(c[1]), float(c[2]), frame="map", child=odom_frame)
 
     def to_json(self) -> dict[str, Any]:
@@ -259,7 +260,3 @@ class PoseCorrector:
             "alone": self.alone,
             "window": len(self.ids),
         }
-
-
-def _inverse(a: Array) -> Array:
-    return pose_ekf.between(a, np.zeros(3))

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common import ekf, wall_model
+from wallmap.common import ekf, se2, wall_model
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.map_config import MapperConfig
@@ -35,14 +35,14 @@ CROSSING_REACH = 0.2  # m it must reach past the line on both sides: a T only me
 
 def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
     """The observed segment's two ends in the map frame."""
-    rot = wall_model.rotation(pose[2])
+    rot = se2.rotation(pose[2])
     return np.array([pose[:2] + rot @ obs.p0, pose[:2] + rot @ obs.p1])
 
 
 def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
     """Whether pose ``b`` is a new viewpoint after ``a``."""
     (ax, ay, ayaw), (bx, by, byaw) = a.tolist(), b.tolist()
-    turn = abs((byaw - ayaw + math.pi) % (2 * math.pi) - math.pi)
+    turn = abs(se2.wrap(byaw - ayaw))
     return math.hypot(bx - ax, by - ay) >= distance or turn >= angle
 
 
@@ -96,7 +96,7 @@ class WallMap:
         A ray crosses a wall's line at some distance from the sensor; it ended past the wall by
         more than ``THROUGH_MARGIN`` plus its range noise, so the wall is not there.
         """
-        rot = wall_model.rotation(pose[2])
+        rot = se2.rotation(pose[2])
         start = pose[:2] + rot @ origin
         stops = pose[:2] + ends @ rot.T
         rays = stops - start

@@ -126,7 +126,7 @@ def _work(
             )
         if updates is not None:  # the walls are used
             _take_updates(updates, tracker, stats)
-        scan = select_scan(frame.points, frame.base_from_sensor, rows, frame.band is not None)
+        scan = select_scan(frame.points, frame.T_base_sensor, rows, frame.band is not None)
         estimate = tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp)
         if not estimate.registration.accepted:
             reason = estimate.registration.reason

@@ -15,8 +15,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
+from wallmap.common import se2
 from wallmap.common.codec import decode
 from wallmap.common.map_records import MapUpdate, WallRecord
 from wallmap.common.messages import Pose
@@ -27,8 +27,8 @@ from wallmap.common.scan_matching import (
     WallLine,
     register_to_walls,
 )
+from wallmap.common.se2 import Array
 
-Array = NDArray[np.float64]
 # What a malformed wall record raises on the way in (a field missing, of a wrong type or size).
 
 
@@ -65,22 +65,6 @@ class Estimate:
     wall_points: int  # scan points matched to mapped walls (0: walls not used)
 
 
-def _se2(x: float, y: float, yaw: float) -> Array:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
-def _pose_of(t: Array) -> Array:
-    return np.array([t[0, 2], t[1, 2], math.atan2(t[1, 0], t[0, 0])])
-
-
-def _rotate_cov(cov: Array, yaw: float) -> Array:
-    """A pose covariance expressed in a frame turned by ``yaw``."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ cov @ rot.T
-
-
 def wall_lines(record: WallRecord) -> list[WallLine]:
     """The lines of one wall of a map reply or update: one per served segment."""
     segments = np.asarray(record.segments, dtype=float).reshape(-1, 2, 2)
@@ -93,7 +77,7 @@ class PoseTracker:
     def __init__(self, config: OdometryConfig | None = None) -> None:
         self.config = config or OdometryConfig()
         self.matcher = ScanMatcher(self.config.matcher)
-        self.map_from_odom = _se2(*self.config.initial_pose)
+        self.map_from_odom = se2.matrix(self.config.initial_pose)
         self._walls: dict[int, list[WallLine]] = {}
 
     @property
@@ -137,11 +121,10 @@ class PoseTracker:
     def update(self, points: Array, stamp: float, child: str = "base_link") -> Estimate:
         """The pose of one scan (N x 2 points in the base frame, NaN rows allowed)."""
         registration = self.matcher.update(points, stamp)
-        odom_pose = _se2(*registration.pose)
-        guess_t = self.map_from_odom @ odom_pose
-        guess = _pose_of(guess_t)
-        turn = math.atan2(self.map_from_odom[1, 0], self.map_from_odom[0, 0])
-        cov = _rotate_cov(registration.cov, turn)
+        odom_pose = se2.matrix(registration.pose)
+        guess = se2.from_matrix(self.map_from_odom @ odom_pose)
+        turn = se2.from_matrix(self.map_from_odom)[2]
+        cov = se2.rotate_covariance(registration.cov, turn)
         matched = 0
         walls = self._walls_near(guess[:2]) if self.config.use_walls and self._walls else []
         if walls and registration.accepted:
@@ -150,8 +133,8 @@ class PoseTracker:
                 points, guess, prior, walls, self.config.matcher
             )
             if matched >= self.config.min_wall_points:
-                refined_t = _se2(*refined)
+                refined_t = se2.matrix(refined)
                 self.map_from_odom = refined_t @ np.linalg.inv(odom_pose)
-                guess, cov = _pose_of(refined_t), refined_cov  # yaw wrapped to (-pi, pi]
+                guess, cov = se2.from_matrix(refined_t), refined_cov  # yaw wrapped to (-pi, pi]
         pose = Pose(stamp, float(guess[0]), float(guess[1]), float(guess[2]), cov, "map", child)
         return Estimate(pose, registration, matched)

@@ -16,8 +16,7 @@ from collections import deque
 from collections.abc import Iterable
 from typing import Any
 
-import numpy as np
-
+from wallmap.common import se2
 from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
 from wallmap.common.messages import Observations, Pose
 
@@ -174,13 +173,10 @@ class LiveMap:
         if obs is not None:
             placed = {"stamp": obs.stamp, "seq": obs.seq, "pose": None, "walls": []}
             if near is not None:
-                c, s = math.cos(near.yaw), math.sin(near.yaw)
-                rot, t = np.array([[c, -s], [s, c]]), np.array([near.x, near.y])
                 placed["pose"] = _pose_json(near)
-                placed["walls"] = [
-                    {"p0": (rot @ w.p0 + t).tolist(), "p1": (rot @ w.p1 + t).tolist()}
-                    for w in obs.walls
-                ]
+                for w in obs.walls:
+                    p0, p1 = se2.transform_points((w.p0, w.p1), near.vector).tolist()
+                    placed["walls"].append({"p0": p0, "p1": p1})
         return {
             "pose": _pose_json(pose) if pose else None,
             "recent": recent,

@@ -1,6 +1,7 @@
 """Mutation fuzzing of every decoder a service runs on received bytes.
 
-Used by the tests and ``benchmarks/fuzz.py``.
+Used by the tests and ``benchmarks/fuzz.py``; it lives beside the commands, not in ``common/``,
+because it reaches into the services for their decoders.
 Each decoder gets valid messages broken in the ways networks and people break them: random bytes,
 truncation, flipped bytes, fields of the wrong type, NaN and infinities, empty and absurdly large
 arrays. A decoder may accept a message or refuse it with the error its service catches (and
@@ -34,6 +35,8 @@ from wallmap.common.messages import (
     unpack_progress,
 )
 from wallmap.common.scan_row import RowSelection
+from wallmap.services.mapper.pose_input import make_pose_input
+from wallmap.services.odometry.tracker import PoseTracker
 
 Decoder = Callable[[bytes], object]
 _ODD_VALUES: list[Any] = [
@@ -55,8 +58,6 @@ class Outcome:
 
 
 def _cdr_samples() -> dict[str, tuple[bytes, Decoder]]:
-    from wallmap.services.mapper.pose_input import make_pose_input  # noqa: PLC0415 (a service)
-
     store = get_typestore(Stores.ROS2_HUMBLE)
     types = store.types
     stamp = types["builtin_interfaces/msg/Time"](sec=5, nanosec=0)
@@ -106,8 +107,6 @@ def _cdr_samples() -> dict[str, tuple[bytes, Decoder]]:
 
 def samples() -> dict[str, tuple[bytes, Decoder]]:
     """Per decoder: a valid message and the decoder."""
-    from wallmap.services.odometry.tracker import PoseTracker  # noqa: PLC0415 (a service)
-
     tracker = PoseTracker()
     cov = np.eye(2) * 1e-4
     ends = np.array([2.0, -1.0]), np.array([2.0, 1.0])

@@ -1,6 +1,6 @@
 """Synthetic scenes: floor plans, trajectories, depth rendering and ROS bags with truth."""
 
-from wallmap.common.scene.bags import (
+from wallmap.scene.bags import (
     AMCL_COVARIANCE,
     AMCL_POSE_TOPIC,
     BASE_FRAME,
@@ -25,7 +25,7 @@ from wallmap.common.scene.bags import (
     truth_path_for,
     write_scene_bag,
 )
-from wallmap.common.scene.floorplan import (
+from wallmap.scene.floorplan import (
     FloorPlan,
     Furniture,
     Layout,
@@ -35,9 +35,9 @@ from wallmap.common.scene.floorplan import (
     smooth_route,
     with_counters,
 )
-from wallmap.common.scene.handheld import Handheld, HandheldStyle, write_handheld_recording
-from wallmap.common.scene.kinds import SCENE_KINDS, SceneKind
-from wallmap.common.scene.render import (
+from wallmap.scene.handheld import Handheld, HandheldStyle, write_handheld_recording
+from wallmap.scene.kinds import SCENE_KINDS, SceneKind
+from wallmap.scene.render import (
     Camera,
     Scanner,
     depth_to_points,
@@ -46,7 +46,7 @@ from wallmap.common.scene.render import (
     scan_walls_seen,
     walls_seen,
 )
-from wallmap.common.scene.trajectory import (
+from wallmap.scene.trajectory import (
     Trajectory,
     drifting_odometry,
     generate_trajectory,

@@ -32,8 +32,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from wallmap.common.scene.floorplan import FloorPlan, generate_floorplan
-from wallmap.common.scene.render import (
+from wallmap.common import se2
+from wallmap.scene.floorplan import FloorPlan, generate_floorplan
+from wallmap.scene.render import (
     Camera,
     Scanner,
     depth_to_points,
@@ -42,7 +43,7 @@ from wallmap.common.scene.render import (
     scan_walls_seen,
     walls_seen,
 )
-from wallmap.common.scene.trajectory import Trajectory, drifting_odometry, generate_trajectory
+from wallmap.scene.trajectory import Trajectory, drifting_odometry, generate_trajectory
 
 BagFormat = Literal["ros1", "ros2-mcap", "ros2-sqlite3"]
 SensorKind = Literal["pointcloud", "depth16", "depth32", "laserscan"]
@@ -203,11 +204,6 @@ def sub_seeds(seed: int, n: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(n)]
 
 
-def _se2(x: float, y: float, yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
-
-
 def _yaw_quaternion(sink: BagSink, yaw: float) -> Any:
     return sink.types["geometry_msgs/msg/Quaternion"](
         x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
@@ -240,14 +236,14 @@ def transform_stamped(
 def _planar_transform(
     sink: BagSink, stamp_ns: int, parent: str, child: str, pose: np.ndarray
 ) -> Any:
-    yaw = math.atan2(pose[1, 0], pose[0, 0])
+    x, y, yaw = se2.from_matrix(pose)
     return transform_stamped(
         sink,
         TF_TOPIC,
         stamp_ns,
         parent,
         child,
-        (float(pose[0, 2]), float(pose[1, 2]), 0.0),
+        (float(x), float(y), 0.0),
         (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)),
     )
 
@@ -342,8 +338,8 @@ def _body_twist(odom: Trajectory) -> np.ndarray:
     vx = np.gradient(odom.x, odom.stamps)
     vy = np.gradient(odom.y, odom.stamps)
     yaw_rate = np.gradient(np.unwrap(odom.yaw), odom.stamps)
-    c, s = np.cos(odom.yaw), np.sin(odom.yaw)
-    return np.stack([c * vx + s * vy, -s * vx + c * vy, yaw_rate], axis=1)
+    forward, left = se2.unrotate((vx, vy), odom.yaw)
+    return np.stack([forward, left, yaw_rate], axis=1)
 
 
 def _point_cloud(sink: BagSink, stamp_ns: int, depth: np.ndarray, camera: Camera) -> Any:
@@ -528,9 +524,9 @@ def write_scene_bag(
             static = _camera_static_tf(sink, stamps_ns[0], camera)
         sink.write(tf_static, stamps_ns[0], static)
         for k, stamp_ns in enumerate(stamps_ns):
-            odom_pose = _se2(*odom.pose_at(k))
+            odom_pose = se2.matrix(odom.pose_at(k))
             if k % _MAP_ODOM_EVERY == 0 or k == len(stamps_ns) - 1:
-                map_odom = _se2(*fine.pose_at(k)) @ np.linalg.inv(odom_pose)
+                map_odom = se2.matrix(fine.pose_at(k)) @ np.linalg.inv(odom_pose)
                 msg = _planar_transform(sink, stamp_ns, MAP_FRAME, ODOM_FRAME, map_odom)
                 sink.write(tf, stamp_ns, tf_message(sink, msg))
             msg = _planar_transform(sink, stamp_ns, ODOM_FRAME, BASE_FRAME, odom_pose)

@@ -31,7 +31,7 @@ from wallmap.common.pose3d import (
     quaternion_from_matrix,
     rotation_matrix,
 )
-from wallmap.common.scene.bags import (
+from wallmap.scene.bags import (
     CAMERA_INFO_TOPIC,
     CAMERA_LINK_FRAME,
     IMAGE_TOPIC,
@@ -49,9 +49,9 @@ from wallmap.common.scene.bags import (
     transform_stamped,
     truth_path_for,
 )
-from wallmap.common.scene.floorplan import FloorPlan
-from wallmap.common.scene.render import Camera, render_depth, walls_seen
-from wallmap.common.scene.trajectory import generate_trajectory
+from wallmap.scene.floorplan import FloorPlan
+from wallmap.scene.render import Camera, render_depth, walls_seen
+from wallmap.scene.trajectory import generate_trajectory
 
 HandheldStyle = Literal["camera", "robot", "tum"]
 MAP_FRAME, BASE_FRAME = "map", "base_link"

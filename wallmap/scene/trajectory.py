@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from wallmap.common.scene.floorplan import FloorPlan, smooth_route
+from wallmap.common import se2
+from wallmap.scene.floorplan import FloorPlan, smooth_route
 
 _RAMP_S = 1.0  # time to accelerate from rest to cruise speed (and to stop again)
 
@@ -47,11 +48,6 @@ class Trajectory:
     def from_json(cls, data: dict[str, Any]) -> Trajectory:
         """Inverse of :meth:`to_json`."""
         return cls(*(np.asarray(data[k], dtype=float) for k in ("stamps", "x", "y", "yaw")))
-
-
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    """Angles wrapped to [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def _arc_length_at(t: np.ndarray, duration: float, speed: float) -> np.ndarray:
@@ -121,7 +117,7 @@ def generate_trajectory(
         stamps=start_stamp + t,
         x=np.interp(s, s_curve, curve[:, 0]),
         y=np.interp(s, s_curve, curve[:, 1]),
-        yaw=_wrap(np.interp(s, s_curve, heading_curve) + sweep),
+        yaw=se2.wrap(np.interp(s, s_curve, heading_curve) + sweep),
     )
 
 
@@ -164,8 +160,7 @@ def drifting_odometry(
     rng = np.random.default_rng(seed)
     dx, dy = np.diff(traj.x), np.diff(traj.y)
     dyaw = np.diff(np.unwrap(traj.yaw))
-    c, s = np.cos(traj.yaw[:-1]), np.sin(traj.yaw[:-1])
-    forward, lateral = c * dx + s * dy, -s * dx + c * dy
+    forward, lateral = se2.unrotate((dx, dy), traj.yaw[:-1])  # each step in the body frame
     step = np.hypot(dx, dy)
     travelled = np.concatenate([[0.0], np.cumsum(step)])[:-1] + step / 2
 
@@ -175,10 +170,10 @@ def drifting_odometry(
 
     odo_yaw = traj.yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw + yaw_rate * step)])
     fwd_o, lat_o = forward * scale, lateral * scale + slip * step
-    co, so = np.cos(odo_yaw[:-1]), np.sin(odo_yaw[:-1])
-    odo_x = traj.x[0] + np.concatenate([[0.0], np.cumsum(co * fwd_o - so * lat_o)])
-    odo_y = traj.y[0] + np.concatenate([[0.0], np.cumsum(so * fwd_o + co * lat_o)])
-    return Trajectory(traj.stamps.copy(), odo_x, odo_y, _wrap(odo_yaw))
+    step_x, step_y = se2.rotate((fwd_o, lat_o), odo_yaw[:-1])  # back into the odometry frame
+    odo_x = traj.x[0] + np.concatenate([[0.0], np.cumsum(step_x)])
+    odo_y = traj.y[0] + np.concatenate([[0.0], np.cumsum(step_y)])
+    return Trajectory(traj.stamps.copy(), odo_x, odo_y, se2.wrap(odo_yaw))
 
 
 def write_tum(trajectory: Trajectory, path: str | Path) -> None:

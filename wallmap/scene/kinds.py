@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from wallmap.common.scene.floorplan import (
+from wallmap.scene.floorplan import (
     FloorPlan,
     Layout,
     generate_floorplan,
@@ -16,7 +16,7 @@ from wallmap.common.scene.floorplan import (
     with_counters,
     with_windows,
 )
-from wallmap.common.scene.render import Camera
+from wallmap.scene.render import Camera
 
 
 @dataclass(frozen=True)

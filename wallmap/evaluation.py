@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from wallmap.common.map_records import WallRecord
-from wallmap.common.scene.floorplan import FloorPlan, Wall
+from wallmap.scene.floorplan import FloorPlan, Wall
 
 _EPS = 1e-9
 

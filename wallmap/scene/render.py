@@ -13,7 +13,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from wallmap.common.scene.floorplan import FloorPlan, Point, Wall, point_segment_distance
+from wallmap.scene.floorplan import FloorPlan, Point, Wall, point_segment_distance
 
 # Optical frame (z forward, x right, y down) expressed in camera_link (x forward, z up).
 R_LINK_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -97,7 +97,7 @@ class Camera(_MountedSensor):
         return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
     @property
-    def T_base_camera(self) -> np.ndarray:  # noqa: N802 - transform naming T_parent_child
+    def T_base_camera(self) -> np.ndarray:
         """Pose (4, 4) of the optical frame in base_link: maps optical points to base_link."""
         transform = np.eye(4)
         transform[:3, :3] = self.R_base_link @ R_LINK_OPTICAL
@@ -139,7 +139,7 @@ class Scanner(_MountedSensor):
         return self.angle_min + self.angle_increment * np.arange(self.n_beams)
 
     @property
-    def T_base_laser(self) -> np.ndarray:  # noqa: N802 - transform naming T_parent_child
+    def T_base_laser(self) -> np.ndarray:
         """Pose (4, 4) of the laser frame in base_link: level and facing forward."""
         transform = np.eye(4)
         transform[:3, 3] = self.mount_xyz

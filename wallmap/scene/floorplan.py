@@ -18,6 +18,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from wallmap.common import se2
+
 Point = tuple[float, float]
 
 # A generated plan is valid only with these margins (metres); the trajectory promise of
@@ -75,10 +77,9 @@ class Furniture:
 
     def corners(self) -> np.ndarray:
         """Footprint corners, (4, 2), counter-clockwise."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
         hw, hd = self.size[0] / 2, self.size[1] / 2
         local = np.array([[-hw, -hd], [hw, -hd], [hw, hd], [-hw, hd]])
-        return local @ np.array([[c, s], [-s, c]]) + np.asarray(self.center)
+        return se2.transform_points(local, (*self.center, self.yaw))
 
 
 @dataclass(frozen=True)
@@ -188,10 +189,7 @@ def segment_distances(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.nda
 
 
 def _inside_box(points: np.ndarray, box: Furniture) -> np.ndarray:
-    c, s = math.cos(box.yaw), math.sin(box.yaw)
-    rel = points - np.asarray(box.center)
-    lx = rel[:, 0] * c + rel[:, 1] * s
-    ly = -rel[:, 0] * s + rel[:, 1] * c
+    lx, ly = se2.unrotate((points - np.asarray(box.center)).T, box.yaw)  # in the box's frame
     return (np.abs(lx) <= box.size[0] / 2) & (np.abs(ly) <= box.size[1] / 2)
 
 
@@ -478,11 +476,6 @@ def _line_intersection(p: np.ndarray, d: np.ndarray, q: np.ndarray, e: np.ndarra
     return p + float(_cross2(q - p, e) / _cross2(d, e)) * d
 
 
-def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
-
-
 def _corridor_walls(
     sides: list[list[np.ndarray]], doors: dict[tuple[int, int], list[tuple[float, float]]]
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -515,7 +508,7 @@ def _try_corridor(
     centre = np.vstack([[0.0, 0.0], np.cumsum(lengths[:, None] * dirs, axis=0)])
     half_width = rng.uniform(0.9, 1.25)
     caps = np.radians(rng.uniform(-15.0, 15.0, 2))
-    cap_dirs = (_rotated(normals[0], caps[0]), _rotated(normals[-1], caps[1]))
+    cap_dirs = (se2.rotate(normals[0], caps[0]), se2.rotate(normals[-1], caps[1]))
 
     # Side walls (0 left, 1 right): the centre line offset by half the width, mitred at kinks.
     sides: list[list[np.ndarray]] = []
@@ -557,8 +550,8 @@ def _try_corridor(
                 b = start + (d1 + rng.uniform(0.5, min(1.5, pieces[j + 1] - _MIN_WALL_GAP))) * unit
                 depth_a, depth_b = rng.uniform(2.0, 3.0, 2)
                 lean_a, lean_b = np.radians(rng.uniform(-20.0, 20.0, 2))
-                far_a = a + depth_a * _rotated(outward[run], lean_a)
-                far_b = b + depth_b * _rotated(outward[run], lean_b)
+                far_a = a + depth_a * se2.rotate(outward[run], lean_a)
+                far_b = b + depth_b * se2.rotate(outward[run], lean_b)
                 candidates.append([(a, far_a), (far_a, far_b), (far_b, b)])
     if sum(map(len, doors.values())) < 3 or not all(
         any(doors[side, run] for run in range(n_legs)) for side in (0, 1)
@@ -647,11 +640,10 @@ def _box_fits(plan: FloorPlan, box: Furniture, curve: np.ndarray) -> bool:
 
 def _transform_plan(plan: FloorPlan, angle: float, origin: np.ndarray) -> FloorPlan:
     """Rigidly move the plan: translate ``origin`` to (0, 0), then rotate by ``angle``."""
-    c, s = math.cos(angle), math.sin(angle)
 
     def move(p: Point) -> Point:
-        x, y = p[0] - origin[0], p[1] - origin[1]
-        return (c * x - s * y, s * x + c * y)
+        x, y = se2.rotate((p[0] - origin[0], p[1] - origin[1]), angle).tolist()
+        return (x, y)
 
     return FloorPlan(
         walls=tuple(
@@ -662,6 +654,8 @@ def _transform_plan(plan: FloorPlan, angle: float, origin: np.ndarray) -> FloorP
             Furniture(
                 center=move(f.center),
                 size=f.size,
+                # Exact for a yaw already in range (se2.wrap may move it by an ulp): the truth
+                # files store these yaws, and they stay as drawn.
                 yaw=math.remainder(f.yaw + angle, 2 * math.pi),
                 height=f.height,
                 base=f.base,
@@ -818,10 +812,10 @@ def junction_plan(seed: int) -> FloorPlan:
     route = [(-4.5, depth - 1.2), (-3.5, 1.2), (-1.2, middle), (1.2, middle), (3.5, 1.2),
              (4.5, depth - 1.2)]  # fmt: skip
     angle = float(rng.uniform(-math.pi, math.pi))
-    c, s = math.cos(angle), math.sin(angle)
 
     def turn(p: Sequence[float]) -> Point:
-        return (c * p[0] - s * p[1], s * p[0] + c * p[1])
+        x, y = se2.rotate(p, angle).tolist()
+        return (x, y)
 
     walls = tuple(Wall(i, turn(p), turn(q), height=height) for i, (p, q) in enumerate(segments))
     return FloorPlan(walls, (), height, tuple(turn(p) for p in route))
