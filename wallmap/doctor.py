@@ -28,7 +28,7 @@ from wallmap.doctor_facts import (
     TopicFacts,
 )
 from wallmap.doctor_inspect import inspect_bag, inspect_tum
-from wallmap.services.player.bag_source import (
+from wallmap.services.player.bag_contents import (
     CAMERA_INFO,
     IMAGE,
     LASERSCAN,

@@ -44,18 +44,17 @@ from wallmap.doctor_facts import (
     TopicFacts,
     Verdict,
 )
-from wallmap.services.player.bag_source import (
-    FIXED_FRAMES,
+from wallmap.services.player.bag_contents import (
     IMAGE,
     LASERSCAN,
     POINTCLOUD2,
-    POSE_TOLERANCE,
     TF_TOPICS,
     TF_TYPES,
-    BagSource,
 )
+from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages
+from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE
 from wallmap.services.player.pose_sources import PoseTrack
 from wallmap.services.player.sources import SourceOptions
 from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder

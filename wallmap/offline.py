@@ -20,7 +20,7 @@ from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.wall_map import MapperConfig, MapQuery, WallMap
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
-from wallmap.services.player.bag_source import LASERSCAN
+from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.sources import SourceOptions, open_source
 
 Array = NDArray[np.float64]
