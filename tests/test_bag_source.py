@@ -18,7 +18,7 @@ from wallmap.common.scan_row import STACK, RowSelection, rows_to_search, select_
 from wallmap.common.tf_buffer import transform_matrix
 from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.player.bag_source import BagSource
-from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.errors import PlayerError, Refusal
 from wallmap.services.player.pose_sources import (
     PoseSourceSpec,
     PoseTrack,
@@ -243,8 +243,8 @@ def test_ros1_pointcloud_bag_with_tf(tmp_path: Path) -> None:
         assert pose.stamp == frame.stamp
     # Past the last tf sample (T0 + 5) by more than the tolerance: no pose.
     with BagSource(bag) as source:
-        assert source._pose_at(T0 + 5.2) is None
-        assert source._pose_at(T0 + 5.04) is not None
+        assert source.pose_at(T0 + 5.2) is None
+        assert source.pose_at(T0 + 5.04) is not None
 
 
 def depth_bag_records(msgs: Msgs, *, with_tf: bool = True) -> list[Record]:
@@ -692,15 +692,14 @@ def test_resolve_pose_topic() -> None:
     assert resolve_pose_topic(PoseSourceSpec("odom"), topics) == "/a_odom"
     assert resolve_pose_topic(PoseSourceSpec("pose"), topics) == "pose"
     assert resolve_pose_topic(PoseSourceSpec("pose", topic="/pose"), topics) == "pose"
-    with pytest.raises(
-        PlayerError, match="topic '/odom' is nav_msgs/msg/Odometry, expected geometry_msgs"
-    ):
-        resolve_pose_topic(PoseSourceSpec("pose", topic="odom"), topics)
+    assert resolve_pose_topic(PoseSourceSpec("pose", topic="odom"), topics) == Refusal(
+        "pose source pose:odom: topic '/odom' is nav_msgs/msg/Odometry, expected "
+        "geometry_msgs/msg/PoseStamped or geometry_msgs/msg/PoseWithCovarianceStamped"
+    )
     topics["/amcl_pose"] = "geometry_msgs/msg/PoseWithCovarianceStamped"
-    with pytest.raises(
-        PlayerError, match=r"several pose topics \(/amcl_pose, pose\); choose one with pose:TOPIC"
-    ):
-        resolve_pose_topic(PoseSourceSpec("pose"), topics)
+    assert resolve_pose_topic(PoseSourceSpec("pose"), topics) == Refusal(
+        "pose source pose: several pose topics (/amcl_pose, pose); choose one with pose:TOPIC"
+    )
 
 
 def test_pose_track_interpolation_and_coverage() -> None:

@@ -61,7 +61,7 @@ def test_frames_from_a_mapped_bag_match_a_compressed_copy(tmp_path: Path) -> Non
 def test_a_damaged_message_position_is_one_readable_error(tmp_path: Path) -> None:
     bag = _bag(tmp_path, "broken.bag", fmt="ros1")
     with BagSource(bag) as source:
-        inner = source._reader.readers[0]
+        inner = source._bag.reader.readers[0]
         for index in inner.indexes.values():
             index[:] = [entry._replace(offset=entry.offset + 3) for entry in index]
         with pytest.raises(PlayerError, match=r"cannot read bag .*broken\.bag"):

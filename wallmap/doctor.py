@@ -30,7 +30,7 @@ from wallmap.doctor_facts import (
 from wallmap.doctor_inspect import inspect_bag, inspect_tum
 from wallmap.options import SOURCE
 from wallmap.options import add_command as add_options_command
-from wallmap.services.player.bag_source import (
+from wallmap.services.player.bag_contents import (
     CAMERA_INFO,
     IMAGE,
     LASERSCAN,

@@ -1,33 +1,23 @@
 """Gather the facts ``wallmap doctor`` reports about a bag, before any service runs.
 
-The player's decisions (which sensor topic, whether a pose source is accepted, how the sensor is
-mounted, what it warns about) come from opening ``BagSource`` exactly as ``wallmap player``
-does, so the doctor and the player cannot disagree. Everything else (counts, the tf tree, pose
-coverage, clocks) is read here with rosbags, computed with the player's own helpers where it is
-what the player would compute: header stamps, tf lookups and pose tracks with the player's
-tolerance.
+The doctor reads the bag once, through the player's own reader (``BagFile``, ``read_contents``),
+and makes the player's choices with the player's own functions (``choices``: the sensor topic,
+each candidate pose source, the mounts, the levelled fixed frame), so the doctor and the player
+cannot disagree. Everything else (counts, the tf tree, pose coverage, clocks) is computed from
+the same contents with the player's helpers where it is what the player would compute: header
+stamps, tf lookups and pose tracks with the player's tolerance.
 """
 
 import shlex
-from collections import Counter, deque
-from collections.abc import Iterator, Sequence
+from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
 
-from wallmap.common.ros_poses import (
-    DEFAULT_CHILD,
-    DEFAULT_PARENT,
-    ODOMETRY_TYPE,
-    POSE_TYPES,
-    header_stamp,
-    pose_from_message,
-)
-from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
+from wallmap.common.ros_poses import DEFAULT_CHILD, DEFAULT_PARENT, ODOMETRY_TYPE
+from wallmap.common.tf_buffer import TfError
 from wallmap.doctor_facts import (
     GAP_LIMIT,
     JUMP_LIMIT,
@@ -44,19 +34,29 @@ from wallmap.doctor_facts import (
     TopicFacts,
     Verdict,
 )
-from wallmap.services.player.bag_source import (
-    FIXED_FRAMES,
+from wallmap.services.player.bag_contents import (
     IMAGE,
     LASERSCAN,
     POINTCLOUD2,
-    POSE_TOLERANCE,
-    TF_TOPICS,
-    TF_TYPES,
-    BagSource,
+    BagContents,
+    Stamps,
+    TfLink,
+    read_contents,
+    read_stamps,
 )
-from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.mapped_bag import mapped_messages
-from wallmap.services.player.pose_sources import PoseTrack
+from wallmap.services.player.bag_file import BagFile
+from wallmap.services.player.bag_frames import BagFrames, read_survey_frames
+from wallmap.services.player.choices import (
+    SensorChoice,
+    SensorRefusal,
+    SurveyFrame,
+    choose_placement,
+    choose_sensor,
+    plan_playback,
+)
+from wallmap.services.player.errors import PlayerError, Refusal, decided
+from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE
+from wallmap.services.player.pose_sources import PoseSourceSpec, PoseTrack, parse_pose_source
 from wallmap.services.player.sources import SourceOptions
 from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
 
@@ -71,11 +71,6 @@ FORMATS = {
     b"SQLite format 3\x00": "ros2-sqlite3",
 }
 SUFFIXES = {"ros1": ".bag", "ros2-mcap": ".mcap", "ros2-sqlite3": ".db3"}
-
-
-def _one_line(err: BaseException) -> str:
-    """A library error as one line (some rosbags errors have no text)."""
-    return " ".join(str(err).split()) or type(err).__name__
 
 
 # --- the file -----------------------------------------------------------------------------------
@@ -176,154 +171,48 @@ def _inside(stamps: np.ndarray, spans: Spans) -> int:
     return sum(int(np.count_nonzero((stamps > s) & (stamps < e))) for s, e in spans)
 
 
-# --- reading the bag ----------------------------------------------------------------------------
+# --- tf chains ----------------------------------------------------------------------------------
 
 
-class _Stream:
-    """Header stamps (as the player reads them) and receive times of one topic, in bag order."""
-
-    def __init__(self) -> None:
-        self.stamps: list[float] = []
-        self.receive: list[float] = []
-        self.zero = 0
-
-    def add(self, header: Any, receive_ns: int) -> None:
-        self.zero += header.stamp.sec == 0 and header.stamp.nanosec == 0
-        self.stamps.append(header_stamp(header, receive_ns))
-        self.receive.append(receive_ns * 1e-9)
-
-
-class _Edge:
-    """One tf link as published: static or not (its first sample decides, as in TfBuffer)."""
-
-    def __init__(self, parent: str, child: str, *, static: bool) -> None:
-        self.parent, self.child, self.static = parent, child, static
-        self.stamps: list[float] = []
-
-
-class _Contents:
-    """What one read of the bag holds: tf, pose messages, and the sensor topic's stamps."""
-
-    def __init__(self, reader: AnyReader) -> None:
-        self.reader = reader
-        self.topics = {n: i for n, i in reader.topics.items() if i.msgtype is not None}
-        self.tf = TfBuffer()
-        self.edges: dict[tuple[str, str], _Edge] = {}
-        self.refused: list[str] = []
-        self.poses: dict[str, list[Any]] = {}  # pose topic -> planar poses
-        self.streams: dict[str, _Stream] = {}
-        self.sensor_first: Any = None
-        self.frame_ids: Counter[str] = Counter()
-
-    def _messages(
-        self, connections: list[Connection], *, mapped: bool = False
-    ) -> Iterator[tuple[Connection, int, Any]]:
-        """Deserialized messages of some connections in bag order.
-
-        With ``mapped``, an uncompressed ROS 1 bag is read as the player reads it, as views over
-        the mapped file, so only the headers of big clouds are paged in.
-        """
-        if not connections:
-            return
-        raws = mapped_messages(self.reader, connections) if mapped else None
-        if raws is None:
-            raws = self.reader.messages(connections=connections)
-        for connection, receive_ns, raw in raws:
-            yield connection, receive_ns, self.reader.deserialize(raw, connection.msgtype)
-
-    def read_poses(self) -> None:
-        """Read /tf, /tf_static (the topics BagSource reads) and every odometry or pose topic."""
-        tf_topics = {
-            name: TF_TOPICS[name.lstrip("/")]
-            for name, info in self.topics.items()
-            if name.lstrip("/") in TF_TOPICS and info.msgtype in TF_TYPES
-        }
-        pose_types = {ODOMETRY_TYPE, *POSE_TYPES}
-        pose_topics = [n for n, i in sorted(self.topics.items()) if i.msgtype in pose_types]
-        wanted = [*tf_topics, *pose_topics]
-        connections = [c for name in wanted for c in self.topics[name].connections]
-        for name in pose_topics:
-            self.poses[name], self.streams[name] = [], _Stream()
-        for connection, receive_ns, msg in self._messages(connections):
-            topic = connection.topic
-            if topic in tf_topics:
-                self._add_tf(msg, static=tf_topics[topic])
-            else:
-                self.streams[topic].add(msg.header, receive_ns)
-                self.poses[topic].append(pose_from_message(msg, receive_ns, DEFAULT_CHILD))
-
-    def _add_tf(self, msg: Any, *, static: bool) -> None:
-        for transform in msg.transforms:
-            parent = normalize_frame(transform.header.frame_id)
-            child = normalize_frame(transform.child_frame_id)
-            stamp = transform.header.stamp.sec + transform.header.stamp.nanosec * 1e-9
-            t, q = transform.transform.translation, transform.transform.rotation
-            try:
-                self.tf.add_transform(
-                    parent, child, stamp, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w), static=static
-                )
-            except TfError as err:
-                self.refused.append(str(err))
-                continue
-            edge = self.edges.setdefault((parent, child), _Edge(parent, child, static=static))
-            edge.stamps.append(stamp)
-
-    def read_sensor(self, topic: str) -> None:
-        """Read the sensor topic's stamps and frame names, keeping its first message."""
-        stream = self.streams.setdefault(topic, _Stream())
-        for _, receive_ns, msg in self._messages(self.topics[topic].connections, mapped=True):
-            stream.add(msg.header, receive_ns)
-            self.frame_ids[normalize_frame(msg.header.frame_id)] += 1
-            if self.sensor_first is None:
-                self.sensor_first = msg
-
-    # --- tf chains ----------------------------------------------------------------------------
-
-    def chain(self, source: str, target: str) -> ChainFacts:
-        """The shortest chain of links between two frames, whichever way each link points."""
-        neighbours: dict[str, list[tuple[str, _Edge]]] = {}
-        for edge in self.edges.values():
-            neighbours.setdefault(edge.parent, []).append((edge.child, edge))
-            neighbours.setdefault(edge.child, []).append((edge.parent, edge))
-        facts = ChainFacts(source, target, found=False)
-        if not neighbours:
-            facts.reason = "the bag has no tf"
-            return facts
-        absent = [repr(f) for f in (source, target) if f not in neighbours]
-        if absent:
-            facts.reason = f"{' and '.join(absent)} {'is' if len(absent) == 1 else 'are'} not in tf"
-            return facts
-        previous: dict[str, tuple[str, _Edge] | None] = {source: None}
-        queue = deque([source])
-        while queue and target not in previous:
-            frame = queue.popleft()
-            for neighbour, edge in neighbours[frame]:
-                if neighbour not in previous:
-                    previous[neighbour] = (frame, edge)
-                    queue.append(neighbour)
-        if target not in previous:
-            facts.reason = f"{source!r} and {target!r} are in separate tf trees"
-            return facts
-        path, kinds, frame = [target], [], target
-        while (link := previous[frame]) is not None:
-            frame, edge = link
-            path.append(frame)
-            kinds.append("static" if edge.static else "dynamic")
-        facts.found, facts.path, facts.kinds = True, path[::-1], kinds[::-1]
+def _chain(contents: BagContents, source: str, target: str) -> ChainFacts:
+    """The shortest chain of links between two frames, whichever way each link points."""
+    neighbours: dict[str, list[tuple[str, TfLink]]] = {}
+    for link in contents.tf_links.values():
+        neighbours.setdefault(link.parent, []).append((link.child, link))
+        neighbours.setdefault(link.child, []).append((link.parent, link))
+    facts = ChainFacts(source, target, found=False)
+    if not neighbours:
+        facts.reason = "the bag has no tf"
         return facts
+    absent = [repr(f) for f in (source, target) if f not in neighbours]
+    if absent:
+        facts.reason = f"{' and '.join(absent)} {'is' if len(absent) == 1 else 'are'} not in tf"
+        return facts
+    previous: dict[str, tuple[str, TfLink] | None] = {source: None}
+    queue = deque([source])
+    while queue and target not in previous:
+        frame = queue.popleft()
+        for neighbour, link in neighbours[frame]:
+            if neighbour not in previous:
+                previous[neighbour] = (frame, link)
+                queue.append(neighbour)
+    if target not in previous:
+        facts.reason = f"{source!r} and {target!r} are in separate tf trees"
+        return facts
+    path, kinds, frame = [target], [], target
+    while (step := previous[frame]) is not None:
+        frame, link = step
+        path.append(frame)
+        kinds.append("static" if link.static else "dynamic")
+    facts.found, facts.path, facts.kinds = True, path[::-1], kinds[::-1]
+    return facts
 
-    def chain_edges(self, chain: ChainFacts) -> list[_Edge]:
-        """The dynamic links along a found chain."""
-        links = zip(chain.path, chain.path[1:], strict=False)
-        edges = [self.edges.get((a, b)) or self.edges[(b, a)] for a, b in links]
-        return [e for e in edges if not e.static]
 
-
-def _open(path: Path) -> AnyReader:
-    """Open the bag the way BagSource does (ROS 2 bags without type definitions included)."""
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    reader.open()
-    return reader
+def _dynamic_links(contents: BagContents, chain: ChainFacts) -> list[TfLink]:
+    """The dynamic links along a found chain."""
+    pairs = zip(chain.path, chain.path[1:], strict=False)
+    links = [contents.tf_links.get((a, b)) or contents.tf_links[(b, a)] for a, b in pairs]
+    return [link for link in links if not link.static]
 
 
 # --- the sensor ---------------------------------------------------------------------------------
@@ -350,63 +239,45 @@ def _geometry(msgtype: str, first: Any) -> dict[str, Any]:
     }
 
 
-class _DamagedError(Exception):
-    """The player opened the bag but could not decode its sensor frames: a damaged bag."""
+def _sensor_facts(
+    bag: BagFile, contents: BagContents, sensor: SensorChoice | Refusal, requested: str | None
+) -> tuple[SensorFacts, list[str]]:
+    """The player's sensor decision, and its warnings when it plays with ``--pose-source none``.
 
-
-def _player_sensor(path: Path, requested: str | None) -> tuple[SensorFacts, list[str]] | str:
-    """BagSource's sensor decision and warnings with no pose source, or its error.
-
-    With ``--pose-source none`` nothing about poses or tf can fail, so an error here is about
-    the bag itself or its sensor topics. The share of invalid points is measured on frames as
-    the player decodes them: every scan, or the first few clouds or images.
+    With no pose source nothing about poses or tf can refuse, so what is said here is about the
+    bag itself and its sensor. The share of invalid points is measured on frames as the player
+    plays them: every scan, or the first few clouds or images.
 
     Raises:
-        _DamagedError: A frame cannot be decoded (the player's own message).
+        PlayerError: A frame cannot be read or decoded (the player's own message).
     """
+    if isinstance(sensor, Refusal):
+        return SensorFacts(None, None, sensor.reason), []
+    decision = "chosen with --sensor-topic" if requested else "the only usable sensor topic"
+    facts = SensorFacts(sensor.topic, sensor.msgtype, decision)
+    plan = decided(plan_playback(contents, sensor, PoseSourceSpec("none")))
+    source = BagFrames(bag, *decided(choose_placement(plan, [])))
+    limit = source.frame_count if sensor.msgtype == LASERSCAN else INVALID_SAMPLE
+    invalid = total = 0
+    frames = source.frames()
     try:
-        source = BagSource(path, sensor_topic=requested, pose_source="none")
-    except PlayerError as err:
-        return str(err)
-    with source:
-        decision = "chosen with --sensor-topic" if requested else "the only usable sensor topic"
-        facts = SensorFacts(source.sensor_topic, source.sensor_type, decision)
-        limit = source.frame_count if source.sensor_type == LASERSCAN else INVALID_SAMPLE
-        invalid = total = 0
-        frames = source.frames()
-        try:
-            for count, (frame, _) in enumerate(frames, start=1):
-                invalid += int(np.count_nonzero(np.isnan(frame.points[..., 0])))
-                total += frame.points[..., 0].size
-                if count == limit:
-                    break
-        except PlayerError as err:
-            raise _DamagedError(str(err)) from err
-        finally:
-            frames.close()
-        facts.invalid_frames = min(limit, source.frame_count)
-        facts.invalid = invalid / total if total else None
-        return facts, list(source.warnings)
+        for count, (frame, _) in enumerate(frames, start=1):
+            invalid += int(np.count_nonzero(np.isnan(frame.points[..., 0])))
+            total += frame.points[..., 0].size
+            if count == limit:
+                break
+    finally:
+        frames.close()
+    facts.invalid_frames = min(limit, source.frame_count)
+    facts.invalid = invalid / total if total else None
+    return facts, source.warnings
 
 
 # --- pose sources -------------------------------------------------------------------------------
 
 
-def _player_accepts(path: Path, sensor: str, spec: str) -> tuple[str, list[str], str | None]:
-    """Whether BagSource opens the bag with this pose source ("ok"), and what it says.
-
-    Returns the acceptance, the warnings, and how the player places the frames (the level of
-    the fixed frame, its floor, the band the sensor sees).
-    """
-    try:
-        with BagSource(path, sensor_topic=sensor, pose_source=spec) as source:
-            return "ok", list(source.warnings), source.placement.describe() or None
-    except PlayerError as err:
-        return str(err), [], None
-
-
 def _tf_pose(
-    bag: _Contents, parent: str, stamps: np.ndarray, t0: float, child: str = DEFAULT_CHILD
+    contents: BagContents, parent: str, stamps: np.ndarray, t0: float, child: str = DEFAULT_CHILD
 ) -> PoseFacts:
     """Coverage of a tf pose source, as the player's lookups with its tolerance answer it.
 
@@ -415,12 +286,12 @@ def _tf_pose(
     """
     default = parent == DEFAULT_PARENT and child == DEFAULT_CHILD
     facts = PoseFacts(f"tf:{parent}>{child}", default, available=False)
-    chain = bag.chain(parent, child)
+    chain = _chain(contents, parent, child)
     if not chain.found:
         facts.reason = chain.reason
         return facts
     facts.available = True
-    dynamic = [np.asarray(e.stamps) for e in bag.chain_edges(chain)]
+    dynamic = [np.asarray(link.stamps) for link in _dynamic_links(contents, chain)]
     gaps: Spans = []
     if dynamic:
         facts.samples = min(s.size for s in dynamic)
@@ -432,7 +303,7 @@ def _tf_pose(
         answered = 0
         for stamp in stamps:
             try:
-                bag.tf.lookup(parent, child, float(stamp), tolerance=POSE_TOLERANCE)
+                contents.tf.lookup(parent, child, float(stamp), tolerance=POSE_TOLERANCE)
             except TfError:
                 continue
             answered += 1
@@ -440,14 +311,15 @@ def _tf_pose(
     return facts
 
 
-def _topic_pose(bag: _Contents, topic: str, stamps: np.ndarray, t0: float) -> PoseFacts:
+def _topic_pose(contents: BagContents, topic: str, stamps: np.ndarray, t0: float) -> PoseFacts:
     """Coverage of an odometry or pose topic, interpolated as the player's PoseTrack does."""
-    kind = "odom" if bag.topics[topic].msgtype == ODOMETRY_TYPE else "pose"
-    facts = PoseFacts(f"{kind}:{topic}", default=False, available=bool(bag.poses[topic]))
-    if not facts.available:
+    kind = "odom" if contents.topics[topic].msgtype == ODOMETRY_TYPE else "pose"
+    poses = contents.poses[topic]
+    facts = PoseFacts(f"{kind}:{topic}", default=False, available=bool(poses))
+    if not poses:
         facts.reason = f"topic {topic} has no messages"
         return facts
-    track = PoseTrack.from_poses(bag.poses[topic])
+    track = PoseTrack.from_poses(poses)
     facts.samples = len(track)
     facts.start = round(float(track.stamps[0]) - t0, 3)
     facts.end = round(float(track.stamps[-1]) - t0, 3)
@@ -461,10 +333,39 @@ def _topic_pose(bag: _Contents, topic: str, stamps: np.ndarray, t0: float) -> Po
     return facts
 
 
+def _judge_poses(report: Report, bag: BagFile, contents: BagContents, sensor: SensorChoice) -> None:
+    """Whether the player plays with each pose source ("ok") or its refusal, and what it says.
+
+    The player's warnings with a source and how it places the frames (the level of the fixed
+    frame, its floor, the band the sensor sees) are kept. The frames the survey looks at are
+    the same for every source, so they are read once.
+
+    Raises:
+        PlayerError: The surveyed frames cannot be read (a damaged chunk).
+    """
+    surveyed: list[SurveyFrame] | None = None
+    for pose in report.poses:
+        if not (pose.available or pose.default):  # the default's refusal is what `up` says
+            continue
+        plan = plan_playback(contents, sensor, parse_pose_source(pose.source))
+        if isinstance(plan, Refusal):
+            pose.player = plan.reason
+            continue
+        if surveyed is None and plan.surveys:
+            surveyed = read_survey_frames(bag, sensor)
+        placed = choose_placement(plan, surveyed or [])
+        if isinstance(placed, Refusal):
+            pose.player = placed.reason
+            continue
+        plan, placement = placed
+        pose.player, pose.warnings = "ok", plan.warnings
+        pose.placement = placement.describe() or None
+
+
 # --- clocks -------------------------------------------------------------------------------------
 
 
-def _clock(topic: str, stream: _Stream, t0: float, bag_start: float) -> ClockFacts:
+def _clock(topic: str, stream: Stamps, t0: float, bag_start: float) -> ClockFacts:
     """Steps back and jumps between consecutive messages, and header stamps vs receive times."""
     stamps, receive = np.asarray(stream.stamps), np.asarray(stream.receive)
     facts = ClockFacts(topic, int(stamps.size), zero_stamps=stream.zero)
@@ -492,13 +393,18 @@ def _up(path: str, *options: str) -> str:
     return " ".join(["wallmap", "up", shlex.quote(path), "--fast", *options])
 
 
-def _verdict(report: Report, requested: str | None) -> tuple[Verdict, PoseFacts | None]:
-    """Conclude: which command maps this bag (and with which pose source), or why none does."""
+def _verdict(
+    report: Report, requested: str | None, *, several: bool
+) -> tuple[Verdict, PoseFacts | None]:
+    """Conclude: which command maps this bag (and with which pose source), or why none does.
+
+    ``several``: the player refused to choose among several usable sensor topics.
+    """
     sensor = report.sensor
     assert sensor is not None  # set for every readable bag
     topic_option = ("--sensor-topic", shlex.quote(requested)) if requested else ()
     if sensor.topic is None:
-        if sensor.decision.startswith("several sensor topics"):
+        if several:
             command = _up(report.path, "--sensor-topic", "TOPIC")
             text = f"choose a sensor topic: `{command}` (check it first with doctor --sensor-topic)"
             return Verdict("choose-sensor", text), None
@@ -551,108 +457,115 @@ def inspect_bag(path: Path, sensor_topic: str | None = None) -> Report:
         PlayerError: The path does not exist.
         OSError: The file cannot be read.
     """
-    report = Report(path=str(path), file=file_facts(path))
+    file = file_facts(path)
     try:
-        decided = _player_sensor(path, sensor_topic)
-    except _DamagedError as err:
-        return _refuse(report, str(err))
-    error = decided if isinstance(decided, str) else None
-    try:
-        reader = _open(path)
-    except Exception as err:  # rosbags fails on damaged bags in many ways
-        return _refuse(report, error or f"cannot read bag {path}: {_one_line(err)}")
-    try:
-        if error is not None and not report.file.name_matches:
-            return _refuse(report, error)  # BagSource refused the file before reading it
-        sensor, player_warnings = (
-            (SensorFacts(None, None, error), []) if isinstance(decided, str) else decided
-        )
-        bag = _Contents(reader)
-        try:
-            bag.read_poses()
-            if sensor.topic is not None:
-                bag.read_sensor(sensor.topic)
-        except Exception as err:  # a damaged chunk the player would stop at as well
-            return _refuse(report, error or f"cannot read bag {path}: {_one_line(err)}")
-        report.readable = True
-        _fill(report, bag, sensor, reader)
-    finally:
-        reader.close()
-    if sensor.topic is not None:
-        for pose in report.poses:
-            if pose.available or pose.default:  # the default's refusal is what `up` would say
-                pose.player, pose.warnings, pose.placement = _player_accepts(
-                    path, sensor.topic, pose.source
-                )
-    report.verdict, chosen = _verdict(report, sensor_topic)
+        with BagFile(path) as bag:
+            return _inspect(Report(path=str(path), file=file), bag, sensor_topic)
+    except PlayerError as err:  # the player's reason: a file it cannot read, a damaged chunk
+        return _refuse(Report(path=str(path), file=file), str(err))
+
+
+def _inspect(report: Report, bag: BagFile, requested: str | None) -> Report:
+    """Read the bag's contents once, make the player's choices and report them.
+
+    Raises:
+        PlayerError: A damaged chunk or sensor frame, where the player would stop too.
+    """
+    contents = read_contents(bag)
+    sensor = choose_sensor(contents, requested)
+    facts, player_warnings = _sensor_facts(bag, contents, sensor, requested)
+    stamps = None
+    if isinstance(sensor, SensorChoice):
+        stamps = read_stamps(bag, bag.topics[sensor.topic])
+    report.readable = True
+    _fill(report, contents, facts, stamps)
+    if isinstance(sensor, SensorChoice):
+        _judge_poses(report, bag, contents, sensor)
+    several = isinstance(sensor, SensorRefusal) and bool(sensor.candidates)
+    report.verdict, chosen = _verdict(report, requested, several=several)
     # What the player would warn about when run as recommended (with no poses: as `none`).
     report.warnings = chosen.warnings if chosen is not None else player_warnings
     report.placement = chosen.placement if chosen is not None else None
     return report
 
 
-def _fill(report: Report, bag: _Contents, sensor: SensorFacts, reader: AnyReader) -> None:
+def _fill(
+    report: Report, contents: BagContents, sensor: SensorFacts, stamps: Stamps | None
+) -> None:
     """Turn what was read into the report's facts."""
-    report.start = reader.start_time * 1e-9 if reader.message_count else None
-    report.duration = reader.duration * 1e-9 if reader.message_count else 0.0
+    report.start = contents.start_ns * 1e-9 if contents.message_count else None
+    report.duration = contents.duration_ns * 1e-9 if contents.message_count else 0.0
     report.topics = [
-        TopicFacts(name, info.msgtype or "", info.msgcount)
-        for name, info in sorted(bag.topics.items())
+        TopicFacts(name, topic.msgtype, topic.count)
+        for name, topic in sorted(contents.topics.items())
     ]
     report.sensor = sensor
-    stamps = np.asarray(bag.streams[sensor.topic].stamps) if sensor.topic else np.empty(0)
+    sensor_stamps = np.asarray(stamps.stamps if stamps is not None else [])
     # Times are told from the first sensor stamp, or from the first pose without a sensor.
-    firsts = [min(s.stamps) for s in bag.streams.values() if s.stamps]
-    firsts += [min(e.stamps) for e in bag.edges.values() if not e.static]
-    if stamps.size:
-        firsts = [float(stamps.min())]
+    firsts = [min(s.stamps) for s in contents.pose_stamps.values() if s.stamps]
+    firsts += [min(link.stamps) for link in contents.tf_links.values() if not link.static]
+    if sensor_stamps.size:
+        firsts = [float(sensor_stamps.min())]
     t0 = report.t0 = min(firsts) if firsts else report.start or 0.0
+    if stamps is not None:
+        _fill_sensor(sensor, contents, stamps)
+    _fill_tf(report, contents, t0)
+    _fill_poses(report, contents, sensor_stamps, t0)
+    streams = {sensor.topic: stamps} if sensor.topic is not None and stamps is not None else {}
+    streams.update(contents.pose_stamps)  # the sensor first, then the pose topics
+    bag_start = report.start or 0.0
+    report.clock = [_clock(topic, s, t0, bag_start) for topic, s in streams.items()]
 
-    if sensor.topic is not None:
-        sensor.frames = int(stamps.size)
-        steps = np.diff(np.sort(stamps))
-        steps = steps[steps > 0]
-        sensor.rate_hz = round(1.0 / float(np.median(steps)), 3) if steps.size else None
-        sensor.frame_ids = dict(bag.frame_ids.most_common())
-        if bag.sensor_first is not None:
-            sensor.geometry = _geometry(sensor.type or "", bag.sensor_first)
 
+def _fill_sensor(sensor: SensorFacts, contents: BagContents, stamps: Stamps) -> None:
+    """The sensor's frames: how many, their rate and frame names, and their size."""
+    sensor.frames = len(stamps.stamps)
+    steps = np.diff(np.sort(np.asarray(stamps.stamps)))
+    steps = steps[steps > 0]
+    sensor.rate_hz = round(1.0 / float(np.median(steps)), 3) if steps.size else None
+    sensor.frame_ids = dict(stamps.frame_ids.most_common())
+    first = contents.firsts.get(sensor.topic or "")
+    if first is not None:
+        sensor.geometry = _geometry(sensor.type or "", first)
+
+
+def _fill_tf(report: Report, contents: BagContents, t0: float) -> None:
+    """The tf tree: frames, links, and the chains the player needs."""
     tf = report.tf
-    tf.frames = bag.tf.frames
-    tf.refused, tf.refused_example = len(bag.refused), next(iter(bag.refused), None)
-    for edge in sorted(bag.edges.values(), key=lambda e: (e.static, e.parent, e.child)):
-        facts = EdgeFacts(edge.parent, edge.child, edge.static, len(edge.stamps))
-        if not edge.static:
-            facts.start = round(min(edge.stamps) - t0, 3)
-            facts.end = round(max(edge.stamps) - t0, 3)
-            facts.gaps = _span_summary(_gap_spans(np.asarray(edge.stamps)), t0)
+    tf.frames = contents.tf.frames
+    tf.refused = len(contents.tf_refused)
+    tf.refused_example = next(iter(contents.tf_refused), None)
+    links = sorted(contents.tf_links.values(), key=lambda e: (e.static, e.parent, e.child))
+    for link in links:
+        facts = EdgeFacts(link.parent, link.child, link.static, len(link.stamps))
+        if not link.static:
+            facts.start = round(min(link.stamps) - t0, 3)
+            facts.end = round(max(link.stamps) - t0, 3)
+            facts.gaps = _span_summary(_gap_spans(np.asarray(link.stamps)), t0)
         tf.edges.append(facts)
     # The sensor's mounting (its most used frames; a frame already base_link needs none).
-    mounts = [f for f in sensor.frame_ids if f and f != DEFAULT_CHILD][:MOST_SENSOR_FRAMES]
+    sensor_frames = report.sensor.frame_ids if report.sensor is not None else {}
+    mounts = [f for f in sensor_frames if f and f != DEFAULT_CHILD][:MOST_SENSOR_FRAMES]
     pairs = [(frame, DEFAULT_CHILD) for frame in mounts]
     pairs += [(DEFAULT_PARENT, DEFAULT_CHILD), ("odom", DEFAULT_CHILD)]
-    tf.chains = [bag.chain(source, target) for source, target in pairs]
+    tf.chains = [_chain(contents, source, target) for source, target in pairs]
 
-    report.poses = [_tf_pose(bag, DEFAULT_PARENT, stamps, t0)]
-    if "odom" in bag.tf.frames:
-        report.poses.append(_tf_pose(bag, "odom", stamps, t0))
+
+def _fill_poses(report: Report, contents: BagContents, stamps: np.ndarray, t0: float) -> None:
+    """Every candidate pose source and what it covers, the default first."""
+    report.poses = [_tf_pose(contents, DEFAULT_PARENT, stamps, t0)]
+    if "odom" in contents.tf.frames:
+        report.poses.append(_tf_pose(contents, "odom", stamps, t0))
     # A handheld camera or a SLAM: the fixed frame straight to the frame carrying the sensor.
-    sensor_frame = next(iter(sensor.frame_ids), None)
+    sensor_frames = report.sensor.frame_ids if report.sensor is not None else {}
+    sensor_frame = next(iter(sensor_frames), None)
+    tf = contents.tf
     for fixed in FIXED_FRAMES:
-        moving = bag.tf.moving_frame(fixed, sensor_frame) if sensor_frame else None
-        if (
-            moving is not None
-            and moving != DEFAULT_CHILD
-            and not bag.tf.has_path(fixed, DEFAULT_CHILD)
-        ):
-            report.poses.append(_tf_pose(bag, fixed, stamps, t0, moving))
-    topics = sorted(bag.poses, key=lambda topic: bag.topics[topic].msgtype != ODOMETRY_TYPE)
-    report.poses += [_topic_pose(bag, topic, stamps, t0) for topic in topics]
-
-    bag_start = report.start or 0.0
-    report.clock = [_clock(topic, s, t0, bag_start) for topic, s in bag.streams.items()]
-    if sensor.topic is not None:  # the sensor first
-        report.clock.sort(key=lambda c: c.topic != sensor.topic)
+        moving = tf.moving_frame(fixed, sensor_frame) if sensor_frame else None
+        if moving is not None and moving != DEFAULT_CHILD and not tf.has_path(fixed, DEFAULT_CHILD):
+            report.poses.append(_tf_pose(contents, fixed, stamps, t0, moving))
+    topics = sorted(contents.poses, key=lambda t: contents.topics[t].msgtype != ODOMETRY_TYPE)
+    report.poses += [_topic_pose(contents, topic, stamps, t0) for topic in topics]
 
 
 def inspect_tum(path: Path, source: SourceOptions) -> Report:

@@ -23,7 +23,7 @@ from wallmap.config import Config
 from wallmap.services.mapper import serving
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Pipeline
-from wallmap.services.player.bag_source import LASERSCAN
+from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.sources import SourceOptions, open_source
 
 Array = NDArray[np.float64]

@@ -32,8 +32,13 @@ class Sample:
     """One surveyed frame: its points (sensor frame), T_fixed_sensor, the sensor frame's name."""
 
     points: NDArray[np.float32]
-    fixed_from_sensor: Array
+    T_fixed_sensor: Array
     sensor_frame: str
+
+    def up(self) -> Array:
+        """The sensor's own up axis in the fixed frame: -y of an optical frame, z of a body one."""
+        rotation = self.T_fixed_sensor[:3, :3]
+        return -rotation[:, 1] if forward_axis(self.sensor_frame) == FORWARD_Z else rotation[:, 2]
 
 
 @dataclass(frozen=True)
@@ -57,7 +62,7 @@ class Placement:
 
         Args:
             pose: The 6-DoF pose of the robot (or sensor) frame in the fixed frame, or None.
-            mount: T_robot_sensor.
+            mount: T_base_sensor.
         """
         if pose is None:
             return None, mount
@@ -71,12 +76,6 @@ class Placement:
         if self.band is not None:
             parts.append(f"the sensor sees {self.band[0]:.2f}-{self.band[1]:.2f} m above the floor")
         return "; ".join(parts)
-
-
-def sensor_up(fixed_from_sensor: Array, sensor_frame: str) -> Array:
-    """The sensor's own up axis in the fixed frame: -y of an optical frame, z of a body frame."""
-    rotation = fixed_from_sensor[:3, :3]
-    return -rotation[:, 1] if forward_axis(sensor_frame) == FORWARD_Z else rotation[:, 2]
 
 
 def survey(
@@ -104,8 +103,8 @@ def survey(
         levelling[2, 3] = -(floor_z or 0.0)
         level = None
     else:
-        ups = np.array([sensor_up(s.fixed_from_sensor, s.sensor_frame) for s in samples])
-        positions = np.array([s.fixed_from_sensor[:3, 3] for s in samples])
+        ups = np.array([s.up() for s in samples])
+        positions = np.array([s.T_fixed_sensor[:3, 3] for s in samples])
         level = level_from_frames(clouds, ups, positions, np.random.default_rng(seed))
         levelling = level.matrix(floor_z)
     band = None
@@ -121,7 +120,7 @@ def _in_fixed_frame(sample: Sample) -> Array:
     points = points[np.isfinite(points).all(axis=1)]
     if len(points) > SURVEY_POINTS:
         points = points[:: len(points) // SURVEY_POINTS]
-    transform = sample.fixed_from_sensor
+    transform = sample.T_fixed_sensor
     return points @ transform[:3, :3].T + transform[:3, 3]
 
 

@@ -44,6 +44,31 @@ def _xyz_offsets(msg: Any) -> tuple[int, int, int]:
     return offsets[0], offsets[1], offsets[2]
 
 
+def _check_layout(msg: Any, offsets: tuple[int, int, int], size: int) -> None:
+    """Check that a cloud's steps hold its x/y/z fields and its buffer its rows.
+
+    Raises:
+        PlayerError: Saying which of them does not fit.
+    """
+    height, width = int(msg.height), int(msg.width)
+    point_step, row_step = int(msg.point_step), int(msg.row_step)
+    if max(offsets) + 4 > point_step:
+        raise PlayerError(
+            f"PointCloud2 point_step {point_step} is smaller than its x/y/z fields "
+            f"(offsets {', '.join(map(str, offsets))})"
+        )
+    if row_step < width * point_step and height > 1:
+        raise PlayerError(
+            f"PointCloud2 row_step {row_step} is smaller than width {width} x point_step "
+            f"{point_step}"
+        )
+    needed = (height - 1) * row_step + width * point_step
+    if size < needed:
+        raise PlayerError(
+            f"PointCloud2 data has {size} bytes but its {height}x{width} layout needs {needed}"
+        )
+
+
 def pointcloud2_xyz(msg: Any, rows: slice = slice(None)) -> np.ndarray:
     """The x, y, z of a PointCloud2's rows as (rows, width, 3) float32, without copying if it can.
 
@@ -65,22 +90,8 @@ def pointcloud2_xyz(msg: Any, rows: slice = slice(None)) -> np.ndarray:
     ox, oy, oz = _xyz_offsets(msg)
     if height == 0 or width == 0:
         return np.empty((len(range(height)[rows]), width, 3), dtype=np.float32)
-    if max(ox, oy, oz) + 4 > point_step:
-        raise PlayerError(
-            f"PointCloud2 point_step {point_step} is smaller than its x/y/z fields "
-            f"(offsets {ox}, {oy}, {oz})"
-        )
-    if row_step < width * point_step and height > 1:
-        raise PlayerError(
-            f"PointCloud2 row_step {row_step} is smaller than width {width} x point_step "
-            f"{point_step}"
-        )
     data = np.asarray(msg.data, dtype=np.uint8).reshape(-1)
-    needed = (height - 1) * row_step + width * point_step
-    if data.size < needed:
-        raise PlayerError(
-            f"PointCloud2 data has {data.size} bytes but its {height}x{width} layout needs {needed}"
-        )
+    _check_layout(msg, (ox, oy, oz), data.size)
     order = ">" if msg.is_bigendian else "<"
     if (oy, oz) == (ox + 4, ox + 8):
         view = np.ndarray(

@@ -25,7 +25,7 @@ from wallmap.common.ros_poses import (
     pose_from_matrix,
 )
 from wallmap.common.tf_buffer import normalize_frame
-from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.errors import PlayerError, Refusal
 
 ACCEPTED_FORMS = "tf, tf:PARENT>CHILD, odom, odom:TOPIC, pose, pose:TOPIC, tum:FILE, none"
 
@@ -96,7 +96,7 @@ def parse_pose_source(spec: str) -> PoseSourceSpec:
     raise PlayerError(f"invalid pose source {spec!r}; accepted forms: {ACCEPTED_FORMS}")
 
 
-def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str:
+def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str | Refusal:
     """Pick the bag topic an odom/pose source reads.
 
     Args:
@@ -104,33 +104,31 @@ def resolve_pose_topic(spec: PoseSourceSpec, topics: dict[str, str]) -> str:
         topics: The bag's topic names mapped to their message types.
 
     Returns:
-        The topic name as spelled in the bag (a leading '/' may differ from the spec's).
-
-    Raises:
-        PlayerError: The named topic is absent or of the wrong type, or detection finds no
-            suitable topic (or, for ``pose``, several).
+        The topic name as spelled in the bag (a leading '/' may differ from the spec's), or a
+        refusal: the named topic is absent or of the wrong type, or detection finds no suitable
+        topic (or, for ``pose``, several).
     """
     wanted = (ODOMETRY_TYPE,) if spec.kind == "odom" else POSE_TYPES
     listing = ", ".join(f"{name} ({kind})" for name, kind in sorted(topics.items())) or "none"
     if spec.topic is not None:
         name = next((t for t in topics if t.lstrip("/") == spec.topic.lstrip("/")), None)
         if name is None:
-            raise PlayerError(
+            return Refusal(
                 f"pose source {spec}: the bag has no topic {spec.topic!r} (topics: {listing})"
             )
         if topics[name] not in wanted:
-            raise PlayerError(
+            return Refusal(
                 f"pose source {spec}: topic {name!r} is {topics[name]}, expected "
                 f"{' or '.join(wanted)}"
             )
         return name
     matches = sorted(name for name, kind in topics.items() if kind in wanted)
     if not matches:
-        raise PlayerError(
+        return Refusal(
             f"pose source {spec}: the bag has no {' or '.join(wanted)} topic (topics: {listing})"
         )
     if spec.kind == "pose" and len(matches) > 1:
-        raise PlayerError(
+        return Refusal(
             f"pose source pose: several pose topics ({', '.join(matches)}); "
             f"choose one with pose:TOPIC"
         )

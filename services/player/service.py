@@ -30,7 +30,7 @@ from wallmap.common.messages import Frame, Pose, pack, unpack_progress
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.player.bag_source import LASERSCAN
+from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback

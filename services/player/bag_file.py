@@ -1,0 +1,200 @@
+"""Open a ROS 1 or ROS 2 bag and read its messages, every failure as one readable line.
+
+rosbags fails on a user's bad bag in many ways (a suffix that does not match the contents, an
+old format, a damaged index, a chunk that does not decode, even AssertionError). The player and
+``wallmap doctor`` both read bags through `BagFile`, so the user gets the same one-line
+`PlayerError` from either.
+"""
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Self
+
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
+from rosbags.typesys import Stores, get_typestore
+
+from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.mapped_bag import mapped_messages
+
+BAG_FORMS = "a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml, or a ROS 2 .mcap file"
+# rosbags picks the format from the file name, so the suffix has to match the contents.
+SUFFIXES = {b"#ROSBAG V2.0": ".bag", b"\x89MCAP": ".mcap", b"SQLite format 3\x00": ".db3"}
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of a bag.
+
+    Attributes:
+        name: As spelled in the bag (a leading '/' or not).
+        msgtype: Its message type in ROS 2 spelling, e.g. ``sensor_msgs/msg/PointCloud2``.
+        connections: rosbags' connections carrying it.
+    """
+
+    name: str
+    msgtype: str
+    connections: tuple[Connection, ...]
+
+    @property
+    def count(self) -> int:
+        """Number of messages."""
+        return sum(c.msgcount for c in self.connections)
+
+
+def _one_line(err: BaseException) -> str:
+    """A library error as one readable line (some rosbags errors have no text)."""
+    return " ".join(str(err).split()) or type(err).__name__
+
+
+def _unreadable(path: Path, err: BaseException) -> PlayerError:
+    """The error for a bag rosbags fails on, with its reason kept as one line.
+
+    Old or interrupted ROS 1 recorders leave bags whose index does not match their chunks (e.g.
+    the 2010 demo bag of laser_scan_matcher); ROS 1's own tools repair those, so say how.
+    """
+    repair = ""
+    if path.suffix == ".bag":
+        repair = (
+            f"; ROS 1 can often repair it: `rosbag reindex {path}` rebuilds a broken index, then "
+            f"`rosbag fix {path} fixed.bag` updates old message definitions (e.g. roslib/Header)"
+        )
+    return PlayerError(
+        f"cannot read bag {path}; it looks damaged or was written by an unsupported recorder "
+        f"({_one_line(err)}){repair}"
+    )
+
+
+def _check_path(path: Path) -> None:
+    """Reject paths rosbags cannot read with a message saying why, before rosbags sees them.
+
+    Raises:
+        PlayerError: No such path, a folder without metadata.yaml, an unreadable file, an old
+            or unknown format, or a suffix that does not match the contents.
+    """
+    if not path.exists():
+        raise PlayerError(f"bag not found: {path}")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise PlayerError(f"{path} is a folder without metadata.yaml; expected {BAG_FORMS}")
+        return
+    try:
+        with path.open("rb") as file:
+            magic = file.read(16)
+    except OSError as err:
+        raise PlayerError(f"cannot read bag {path}: {_one_line(err)}") from err
+    if magic.startswith(b"#ROSRECORD"):
+        raise PlayerError(
+            f"{path} is an old '#ROSRECORD V1.x' bag, which cannot be read; convert it to "
+            f"format 2.0 with ROS 1's `rosbag fix` first"
+        )
+    for prefix, suffix in SUFFIXES.items():
+        if magic.startswith(prefix):
+            if path.suffix != suffix:
+                raise PlayerError(f"{path} holds a {suffix} bag; rename it to end in {suffix}")
+            return
+    if magic.startswith(b"#ROSBAG"):
+        version = magic.split(b"\n", 1)[0].decode("ascii", "replace")
+        raise PlayerError(f"{path} is a {version!r} bag; only ROS 1 bag format 2.0 is supported")
+    raise PlayerError(f"{path} is not a ROS bag; expected {BAG_FORMS}")
+
+
+class BagFile:
+    """An open bag: its topics, its time span, and its messages in bag order.
+
+    Attributes:
+        path: The bag.
+        reader: rosbags' reader, open until ``close``.
+        topics: Every topic with a known message type, by name.
+        start_ns: Receive time of the first message, ns.
+        duration_ns: From the first message to the last, ns.
+        message_count: Messages in the bag.
+    """
+
+    def __init__(self, path: Path) -> None:
+        """Open the bag.
+
+        Raises:
+            PlayerError: The path is not a bag rosbags can read (see ``_check_path``), or rosbags
+                fails on it.
+        """
+        self.path = Path(path)
+        _check_path(self.path)
+        # The default typestore only serves ROS 2 bags recorded without type definitions.
+        self.reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        try:
+            self.reader.open()
+        except Exception as err:  # a damaged bag fails in many ways (even AssertionError)
+            raise _unreadable(self.path, err) from err
+        self.topics = {
+            name: Topic(name, info.msgtype, tuple(info.connections))
+            for name, info in self.reader.topics.items()
+            if info.msgtype is not None
+        }
+        self.start_ns: int = self.reader.start_time
+        self.duration_ns: int = self.reader.duration
+        self.message_count: int = self.reader.message_count
+
+    def messages(
+        self,
+        topics: Iterable[Topic],
+        *,
+        mapped: bool = False,
+        start: int | None = None,
+        stop: int | None = None,
+    ) -> Iterator[tuple[str, int, Any]]:
+        """(topic name, receive time ns, deserialized message) of some topics, in bag order.
+
+        Args:
+            topics: The topics to read.
+            mapped: Read an uncompressed ROS 1 bag as views over the mapped file (see
+                ``mapped_bag``): for large clouds of which only some rows are read.
+            start: Bag time (ns) of the first message kept.
+            stop: Bag time (ns) before which messages are kept.
+
+        Raises:
+            PlayerError: A damaged chunk or message (damage surfaces as assorted library errors).
+        """
+        connections = [c for topic in topics for c in topic.connections]
+        if not connections:
+            return
+        try:
+            raws = mapped_messages(self.reader, connections, start, stop) if mapped else None
+            if raws is None:
+                raws = self.reader.messages(connections=connections, start=start, stop=stop)
+            for connection, receive_ns, raw in raws:
+                msg = self.reader.deserialize(raw, connection.msgtype)
+                yield connection.topic, receive_ns, msg
+        except Exception as err:
+            raise _unreadable(self.path, err) from err
+
+    def first(
+        self,
+        topic: Topic,
+        *,
+        mapped: bool = False,
+        start: int | None = None,
+        stop: int | None = None,
+    ) -> tuple[int, Any] | None:
+        """(receive time ns, message) of a topic's first message in ``[start, stop)``, or None.
+
+        Args are those of ``messages``.
+        """
+        stream = self.messages([topic], mapped=mapped, start=start, stop=stop)
+        item = next(stream, None)
+        stream.close()
+        return None if item is None else (item[1], item[2])
+
+    def close(self) -> None:
+        """Close the bag; safe to call twice."""
+        if self.reader.stack is not None:
+            self.reader.close()
+
+    def __enter__(self) -> Self:
+        """The bag itself, closed on the way out of the ``with`` block."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close the bag."""
+        self.close()

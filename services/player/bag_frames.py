@@ -1,0 +1,173 @@
+"""A bag's sensor messages as frames: decoded, mounted and posed as planned (``choices``).
+
+Decoding turns each message into an organized xyz grid; a few frames spread over the bag are
+decoded before playing, for the survey that levels the fixed frame (``read_survey_frames``);
+`BagFrames` then streams every message in bag order with its mount and its pose.
+"""
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+
+from wallmap.common.messages import Pose
+from wallmap.common.ros_poses import header_stamp
+from wallmap.common.scan_row import RowSelection
+from wallmap.common.tf_buffer import normalize_frame
+from wallmap.services.player.bag_contents import LASERSCAN, POINTCLOUD2
+from wallmap.services.player.bag_file import BagFile
+from wallmap.services.player.choices import Plan, SensorChoice, SurveyFrame, choose_mount
+from wallmap.services.player.depth import depth_image_to_xyz
+from wallmap.services.player.errors import PlayerError, Refusal, decided
+from wallmap.services.player.frames import ClosingSource, SensorFrame, hand_out
+from wallmap.services.player.laserscan import laserscan_to_xyz
+from wallmap.services.player.placement import SURVEY_FRAMES, Placement
+from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
+
+Decoder = Callable[[Any, slice], np.ndarray]  # a message and the rows to decode
+
+
+def decoder(sensor: SensorChoice) -> Decoder:
+    """The function turning one sensor message into an (h, w, 3) grid.
+
+    A cloud's grid is a view over the message with non-finite points left as they are, so a
+    scan row is picked without copying the cloud; ``BagFrames.frames`` cleans what it hands out.
+    """
+    if sensor.msgtype == POINTCLOUD2:
+        return pointcloud2_xyz
+    if sensor.msgtype == LASERSCAN:
+        return lambda scan, _rows: laserscan_to_xyz(scan)
+    return lambda image, rows: depth_image_to_xyz(image, sensor.camera_info, rows)
+
+
+def read_survey_frames(bag: BagFile, sensor: SensorChoice) -> list[SurveyFrame]:
+    """The first frame of each of SURVEY_FRAMES stretches of the bag, decoded whole.
+
+    Raises:
+        PlayerError: A damaged chunk (a frame that cannot be decoded is kept as its refusal).
+    """
+    decode = decoder(sensor)
+    topic = bag.topics[sensor.topic]
+    begin, length = bag.start_ns, max(bag.duration_ns, 1)
+    step = length // SURVEY_FRAMES + 1
+    frames = []
+    for start in range(begin, begin + length, step):
+        first = bag.first(topic, mapped=True, start=start, stop=start + step)
+        if first is None:
+            continue
+        receive_ns, msg = first
+        try:
+            points = invalid_to_nan(np.array(decode(msg, slice(None)), dtype=np.float32))
+        except PlayerError as err:
+            points = Refusal(str(err))
+        stamp = header_stamp(msg.header, receive_ns)
+        frames.append(SurveyFrame(stamp, normalize_frame(msg.header.frame_id), points))
+    return frames
+
+
+class BagFrames(ClosingSource):
+    """Sensor frames and robot poses of an open bag, played as a plan says.
+
+    Attributes:
+        path: The bag.
+        sensor_topic: Sensor topic as spelled in the bag.
+        sensor_type: Its message type, e.g. ``sensor_msgs/msg/PointCloud2``.
+        pose_spec: The pose source, as resolved.
+        base_frame: Robot frame that poses describe and ``T_base_sensor`` maps into.
+        warnings: Assumptions made (e.g. an identity sensor mounting) for the CLI to log; a
+            sensor frame first seen while playing adds its own.
+        placement: How frames are placed: the levelled fixed frame, the band the sensor sees.
+    """
+
+    def __init__(self, bag: BagFile, plan: Plan, placement: Placement) -> None:
+        """Play ``bag`` as ``plan`` says, placing frames with ``placement``; ``close`` closes it."""
+        self.path = bag.path
+        self.sensor_topic = plan.sensor.topic
+        self.sensor_type = plan.sensor.msgtype
+        self.pose_spec = plan.poses.spec
+        self.base_frame = plan.poses.base_frame
+        self.warnings = plan.warnings
+        self.placement = placement
+        self._bag, self._plan = bag, plan
+        self._mounts = dict(plan.mounts)
+        self._decode = decoder(plan.sensor)
+
+    def pose_at(self, stamp: float) -> Pose | None:
+        """The base frame's 6-DoF pose at a stamp, or None where the source does not cover it."""
+        return self._plan.poses.at(stamp)
+
+    def _mount(self, frame_id: str, stamp: float) -> np.ndarray:
+        """T_base_sensor for a sensor frame, deciding once per frame name how to obtain it.
+
+        Raises:
+            PlayerError: A new sensor frame that tf does not link to the base frame.
+        """
+        if frame_id not in self._mounts:
+            mount = decided(choose_mount(self._plan.poses, self.sensor_topic, frame_id))
+            self._mounts[frame_id] = mount
+            if mount.warning is not None:
+                self.warnings.append(mount.warning)
+        return self._mounts[frame_id].at(stamp)
+
+    def frames(
+        self,
+        rows: RowSelection | None = None,
+        start: float | None = None,
+        stop: float | None = None,
+    ) -> Iterator[tuple[SensorFrame, Pose | None]]:
+        """Yield every sensor message as (SensorFrame, pose at its stamp or None), in bag order.
+
+        Args:
+            rows: Hand out only what this selection picks (``pick_points``: the band's stack
+                of points, or one row), reading only the image rows it searches
+                (``rows_to_search``): decoding whole clouds is most of a player's time. The band
+                is the selection's, or the one the sensor sees (``placement.band``). None hands
+                out every row.
+            start: Seconds from the bag's start: the first message received then or later.
+            stop: Seconds from the bag's start: messages received before it only.
+
+        Raises:
+            PlayerError: A message cannot be read or decoded (its index is named).
+        """
+        begin = self._bag.start_ns
+        window = {
+            "start": None if start is None else begin + round(start * 1e9),
+            "stop": None if stop is None else begin + round(stop * 1e9),
+        }
+        topic = self._bag.topics[self.sensor_topic]
+        messages = self._bag.messages([topic], mapped=True, **window)
+        for index, (_, receive_ns, msg) in enumerate(messages):
+            stamp = header_stamp(msg.header, receive_ns)
+            frame_id = normalize_frame(msg.header.frame_id)
+            try:
+                mount = self._mount(frame_id, stamp)
+                pose, mount = self.placement.place(self.pose_at(stamp), mount)
+                points, stacked = hand_out(  # a LaserScan has no height: it is one row
+                    lambda rows_read, m=msg: self._decode(m, rows_read),
+                    getattr(msg, "height", 1), rows, mount, self.placement.band,
+                )  # fmt: skip
+                if points.base is not None or points.dtype != np.float32:  # not ours to change
+                    points = np.array(points, dtype=np.float32)
+                points = invalid_to_nan(points)
+            except PlayerError as err:
+                raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
+            bag_time = (receive_ns - begin) * 1e-9
+            yield SensorFrame(stamp, frame_id, points, mount, bag_time, stacked), pose
+
+    @property
+    def frame_count(self) -> int:
+        """Number of sensor messages, for progress reporting."""
+        return self._bag.topics[self.sensor_topic].count
+
+    def __len__(self) -> int:
+        """Number of sensor messages (``frame_count``)."""
+        return self.frame_count
+
+    @property
+    def duration(self) -> float:
+        """Time between the bag's first and last message, seconds."""
+        return self._bag.duration_ns * 1e-9
+
+    def close(self) -> None:
+        """Close the bag; safe to call twice."""
+        self._bag.close()
