@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from conftest import Service, Stack, free_port, wait_for_port
 
+from wallmap.common.map_records import MapReply, MapUpdate
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.scene import write_scene_bag
 
@@ -177,10 +178,11 @@ def test_every_wall_map_message_is_the_whole_map() -> None:
     fb = pytest.importorskip("wallmap.foxglove_bridge")
     bridge = fb.Bridge()
     reply = {
-        "frame": "map", "frames": 10, "stamp": 3.0, "walls": [_wall(1), _wall(2, tentative=True)],
+        "frame": "map", "frames": 10, "observations": 20, "stamp": 3.0,
+        "walls": [_wall(1), _wall(2, tentative=True)],
         "trajectory": [[1.0, 0.0, 0.0, 0.0], [2.0, 0.5, 0.0, 0.1]],
     }  # fmt: skip
-    outs = bridge.map_reply(reply)
+    outs = bridge.map_reply(MapReply.from_map(reply))
     assert [(o.topic, o.log_time) for o in outs] == [
         ("/wallmap/trajectory", 2_000_000_000),
         ("/wallmap/walls", 3_000_000_000),
@@ -205,7 +207,7 @@ def test_every_wall_map_message_is_the_whole_map() -> None:
     assert _one(second["lines"][0], "color") != _one(line, "color")  # tentative stands out
 
     update = {"frames": 12, "stamp": 4.0, "walls": [_wall(3, x=2.0)], "removed": [1]}
-    (out,) = bridge.map_update(update)
+    (out,) = bridge.map_update(MapUpdate.from_map(update))
     assert out.log_time == 4_000_000_000
     assert [_one(e, "id") for e in _fox(out.message)["entities"]] == ["wall/2", "wall/3"]
     assert set(bridge.latest) == {"/wallmap/walls", "/wallmap/trajectory"}
@@ -214,8 +216,8 @@ def test_every_wall_map_message_is_the_whole_map() -> None:
 
 def test_an_empty_map_sends_nothing() -> None:
     fb = pytest.importorskip("wallmap.foxglove_bridge")
-    reply = {"frame": "map", "frames": 0, "stamp": None, "walls": [], "trajectory": []}
-    assert fb.Bridge().map_reply(reply) == []
+    reply = {"frame": "map", "frames": 0, "observations": 0, "stamp": None, "walls": []}
+    assert fb.Bridge().map_reply(MapReply.from_map({**reply, "trajectory": []})) == []
 
 
 def test_observations_are_placed_with_the_pose_at_their_stamp() -> None:
