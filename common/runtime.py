@@ -2,22 +2,19 @@
 
 from __future__ import annotations
 
-import collections
 import logging
 import os
 import signal
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from types import FrameType
 from typing import TypeVar
 
 import zenoh
 
-from wallmap.common.codec import MessageError, encode
-from wallmap.common.history import History
-from wallmap.common.messages import Frame, unpack_frame
+from wallmap.common.codec import encode
 from wallmap.common.transport import Keys
 
 log = logging.getLogger("wallmap")
@@ -69,95 +66,6 @@ class Stats:
         """A copy of all counters."""
         with self._lock:
             return dict(self._counts)
-
-
-def _frame_of(sample: zenoh.Sample, stats: Stats) -> Frame | None:
-    """A received sample as a frame, counted; None (refused and counted) when malformed."""
-    stats.add("received")
-    try:
-        return unpack_frame(sample.payload.to_bytes())
-    except MessageError as err:
-        stats.refuse("frame", str(err))
-        return None
-
-
-def received_frames(channel: zenoh.handlers.Handler[zenoh.Sample], stats: Stats) -> Iterator[Frame]:
-    """The sensor frames a subscriber receives, counted; malformed ones refused and counted."""
-    for sample in drain(channel):
-        if (frame := _frame_of(sample, stats)) is not None:
-            yield frame
-
-
-class _Once:
-    """Which frames were taken already, among the last ``size``: history can bring one twice."""
-
-    def __init__(self, size: int) -> None:
-        self._size = size
-        self._seen: collections.OrderedDict[tuple[str, int], None] = collections.OrderedDict()
-
-    def first(self, frame: Frame) -> bool:
-        """Whether this is the first time ``frame`` comes (and remember it)."""
-        key = (frame.run, frame.seq)
-        if key in self._seen:
-            return False
-        self._seen[key] = None
-        if len(self._seen) > self._size:
-            self._seen.popitem(last=False)
-        return True
-
-
-def frames_in_turn(
-    channel: zenoh.handlers.Handler[zenoh.Sample],
-    stats: Stats,
-    history: History,
-    on_skip: Callable[[list[Frame]], None] | None = None,
-) -> Iterator[Frame]:
-    """The frames to process, in arrival order; in real-time playback, skipping when far behind.
-
-    A service slower than the bag must not fall further and further behind: when more real-time
-    frames wait than twice the history window holds (its frames at the highest rate, or its
-    bytes: a restarted service's catch-up on the whole window, and as much again), it skips to
-    the newest, counts what it skipped, says so and hands the skipped frames to
-    ``on_skip`` (the detector tells the mapper, which then does not wait for them). A burst (a
-    busy moment, the history a restarted service catches up on) is worked off in order. The
-    channel is emptied each turn, so it never fills and never stalls the session. Frames of a
-    player that waits for the pipeline (``--fast``) are never dropped and not read ahead (that
-    player keeps only a few in flight). A frame that comes again
-    (from history) is counted as ``repeated`` and not taken twice.
-    """
-    most = history.samples()
-    once = _Once(4 * most)
-    waiting: collections.deque[Frame] = collections.deque()
-
-    def take(frame: Frame) -> None:
-        if once.first(frame):
-            waiting.append(frame)
-        else:
-            stats.add("repeated")
-
-    for first in received_frames(channel, stats):
-        take(first)
-        while waiting:
-            try:
-                while not waiting[-1].lossless and (sample := channel.try_recv()) is not None:
-                    if (frame := _frame_of(sample, stats)) is not None:
-                        take(frame)
-            except zenoh.ZError:  # the subscriber was undeclared: the service stops
-                return
-            live = [frame for frame in waiting if not frame.lossless]
-            if len(live) > 2 * most or sum(f.points.nbytes for f in live) > 2 * history.max_bytes:
-                newest = live[-1]
-                waiting = collections.deque(f for f in waiting if f.lossless or f is newest)
-                stats.note(
-                    "dropped",
-                    "behind",
-                    f"skipped {len(live) - 1} frames: more behind real-time playback than the "
-                    f"history window ({history.seconds:g} s; --fast loses none)",
-                    n=len(live) - 1,
-                )
-                if on_skip is not None:
-                    on_skip(live[:-1])
-            yield waiting.popleft()
 
 
 class Presence:

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import zenoh
 
-from wallmap.common.history import History
+from wallmap.common.delivery import History, frames_in_turn
 from wallmap.common.messages import Frame, pack
-from wallmap.common.runtime import Stats, frames_in_turn
+from wallmap.common.runtime import Stats
 
 WINDOW = History(seconds=0.5)  # 30 frames at the highest rate
 

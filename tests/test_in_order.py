@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from wallmap.common.delivery import MAX_HELD, InOrder
 from wallmap.common.messages import Observations, Progress
-from wallmap.services.mapper.in_order import MAX_HELD, InOrder
 
 
 def _obs(seq: int, run: str = "r") -> Observations:

@@ -37,7 +37,10 @@ def scene(tmp_path_factory):
 @pytest.fixture(scope="module")
 def reference(scene) -> dict:
     """The uninterrupted map: the services' code in one process, on the same bag."""
-    return {"frames": N_FRAMES, "walls": walls(map_bag(scene.path), min_obs=3)}
+    return {
+        "frames": N_FRAMES,
+        "walls": [w.to_map() for w in walls(map_bag(scene.path), min_obs=3)],
+    }
 
 
 def _play_with_a_fault(stack, scene, fault) -> dict:

@@ -74,7 +74,10 @@ def _play_with_a_fault(stack, scene, fault, *, loses_frames: bool) -> tuple[dict
 @pytest.fixture(scope="module")
 def reference(scene) -> dict:
     """The uninterrupted map: the services' code in one process, on the same bag."""
-    return {"frames": N_FRAMES, "walls": walls(map_bag(scene.path), min_obs=3)}
+    return {
+        "frames": N_FRAMES,
+        "walls": [w.to_map() for w in walls(map_bag(scene.path), min_obs=3)],
+    }
 
 
 def assert_same_walls(reply: dict, reference: dict) -> None:

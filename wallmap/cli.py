@@ -18,6 +18,7 @@ import zenoh
 
 from wallmap import __version__
 from wallmap.arg_types import positive
+from wallmap.common.delivery import StalledError
 from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import setup_logging, stop_on_signals
@@ -67,7 +68,8 @@ from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
 
 FAILURES = (
-    TransportError, PlayerError, TfError, StateError, QueryError, LaunchError, OSError, ValueError,
+    TransportError, PlayerError, TfError, StateError, QueryError, LaunchError, StalledError,
+    OSError, ValueError,
 )  # fmt: skip
 SERVICE = math.inf  # services wait for their router as long as it takes
 ALL = (

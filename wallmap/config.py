@@ -28,7 +28,7 @@ from typing import Any
 
 from wallmap.common import config_file
 from wallmap.common.config_file import Tree
-from wallmap.common.history import History
+from wallmap.common.delivery import History
 from wallmap.common.transport import ZenohSettings
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.mapper.service import MapperSettings

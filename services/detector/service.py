@@ -18,16 +18,15 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
-from wallmap.common.history import History, declare_history_publisher, subscribe_with_history
+from wallmap.common.delivery import (
+    History,
+    declare_history_publisher,
+    frames_in_turn,
+    subscribe_with_history,
+)
 from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
-from wallmap.common.runtime import (
-    Presence,
-    Stats,
-    drain,
-    frames_in_turn,
-    setup_logging,
-)
+from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 

@@ -24,13 +24,18 @@ from typing import Any
 import zenoh
 
 from wallmap.common.codec import SCHEMA_VERSION, MessageError, encode
-from wallmap.common.history import History, subscribe_with_history
+from wallmap.common.delivery import (
+    ACK_EVERY,
+    History,
+    InOrder,
+    RunProgress,
+    subscribe_with_history,
+)
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, Progress, pack, unpack_observations
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import serving, state_file
-from wallmap.services.mapper.in_order import InOrder
 from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
@@ -40,9 +45,7 @@ from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Mapping
 
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
-MAX_RUNS = 16
 HOLD_POLL = 0.02  # s between looks at a held gap
-ACK_EVERY = 8  # frames between acknowledgements while busy
 UPDATE_PERIOD = 0.5  # s between map updates while busy
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 BACKLOG = "backlog"  # dropped because MAX_PENDING newer frames wait for poses too
@@ -97,30 +100,9 @@ class MapperCore:
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
-        self.epoch = uuid.uuid4().hex[:12]  # this process, in every acknowledgement
-        self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict(
-            (r.run, replace(r, epoch=self.epoch)) for r in runs
-        )
+        # Each run's progress, with this process's epoch in every acknowledgement.
+        self.progress = RunProgress(runs, epoch=uuid.uuid4().hex[:12])
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
-
-    def count(self, run: str, seq: int, *, integrated: bool) -> Progress:
-        """Record frame ``seq`` of a run as processed; returns the run's new progress.
-
-        ``processed`` is the next frame number the run may send: frames arrive in order (see
-        ``_observations``), so everything before it has been processed.
-        """
-        old = self.runs.pop(run, Progress(run, 0, 0, 0))
-        new = Progress(
-            run,
-            seq + 1,
-            old.integrated + int(integrated),
-            old.dropped + int(not integrated),
-            self.epoch,
-        )
-        self.runs[run] = new
-        while len(self.runs) > MAX_RUNS:
-            self.runs.popitem(last=False)
-        return new
 
     def reply(self, query: MapQuery, fmt: str) -> bytes:
         """The encoded map reply plus the mapper's counters, built once per map state.
@@ -283,7 +265,7 @@ def _save(core: MapperCore, path: Path | None, config: dict[str, Any] | None) ->
         if not core.dirty:
             return
         slam = core.corrector.to_json() if core.corrector is not None else None
-        document = state_file.to_json(core.map, core.runs.values(), slam, config)
+        document = state_file.to_json(core.map, core.progress.runs.values(), slam, config)
         core.dirty = False
     state_file.write(path, document)
 
@@ -318,7 +300,7 @@ def _observations(
     while True:
         try:
             if not waiting.pending and not waiting.order.waiting():
-                _flush(waiting.acks, progress)  # idle: tell the players where we are
+                core.progress.flush(progress.put)  # idle: tell the players where we are
                 unacked = 0
                 waiting.add(channel.recv())
             # Everything that has arrived, before any wait for a pose: a full channel would
@@ -334,14 +316,8 @@ def _observations(
             time.sleep(HOLD_POLL)  # a gap is held: history may fill it
         unacked += done
         if unacked >= ACK_EVERY:
-            _flush(waiting.acks, progress)
+            core.progress.flush(progress.put)
             unacked = 0
-
-
-def _flush(acks: dict[str, Progress], progress: zenoh.Publisher) -> None:
-    for ack in acks.values():
-        progress.put(pack(ack))
-    acks.clear()
 
 
 def _updates(
@@ -377,9 +353,8 @@ class _Waiting:
         self.corrected = corrected
         self.pose_wait = pose_wait
         self.pending: collections.deque[tuple[float, Observations]] = collections.deque()
-        with core.lock:  # runs restored from the state file: say where they stand, first thing
-            self.acks: dict[str, Progress] = dict(core.runs)  # the latest, not yet published
-            self.order = InOrder(core.runs.values(), gap_wait=gap_wait)
+        with core.lock:  # runs restored from the state file go on from where they stood
+            self.order = InOrder(core.progress.runs.values(), gap_wait=gap_wait)
 
     def add(self, sample: zenoh.Sample | None) -> None:
         """Take a received sample (None: none, time passed): in frame order, once each."""
@@ -394,8 +369,7 @@ class _Waiting:
         for again in taken.repeated:  # its acknowledgement was lost on the way: say it again
             self.core.stats.add("repeated")
             with self.core.lock:
-                if (progress := self.core.runs.get(again.run)) is not None:
-                    self.acks[again.run] = progress
+                self.core.progress.again(again.run)
         if taken.lost:
             self.core.stats.note(
                 "lost", "lost", f"gave up {taken.lost} frames that never came (past the history "
@@ -449,7 +423,7 @@ class _Waiting:
 
     def _done(self, obs: Observations, *, integrated: bool) -> None:
         with self.core.lock:
-            self.acks[obs.run] = self.core.count(obs.run, obs.seq, integrated=integrated)
+            self.core.progress.count(obs.run, obs.seq, integrated=integrated)
 
 
 def _count_drop(stats: Stats, obs: Observations, reason: str, pose_wait: float) -> None:

@@ -3,7 +3,7 @@
 At ``--rate X`` it keeps the bag's timing, scaled; it can be paused, stepped, sought and sped up
 through ``{prefix}/player/control`` or keys on a terminal, and says where it is on
 ``{prefix}/player/progress``. Frames and poses are published with a history window
-(``common.history``): a service that restarts, or a link that comes back, gets what it missed.
+(``common.delivery``): a service that restarts, or a link that comes back, gets what it missed.
 With ``--fast`` it publishes as fast as the pipeline takes it: it keeps at most ``window`` frames
 in flight, counting the frames the mapper acknowledges for this run on the progress key. Before
 the first frame it waits for the services it feeds (their liveliness tokens), so no frame goes
@@ -25,8 +25,8 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode, encode
-from wallmap.common.history import MAX_RATE, History, declare_history_publisher
-from wallmap.common.messages import Frame, Pose, pack, unpack_progress
+from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_history_publisher
+from wallmap.common.messages import Frame, Pose, pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -37,7 +37,6 @@ from wallmap.services.player.playback import Playback
 from wallmap.services.player.sources import FrameSource, SourceOptions, open_source
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
-STOP_POLL = 0.05  # s between checks of the stop event while waiting for acknowledgements
 PROGRESS_PERIOD = 0.2  # s between progress messages
 
 
@@ -133,60 +132,6 @@ def _ask_rows(session: zenoh.Session, keys: Keys) -> RowSelection | None:
             except MessageError:
                 return None
     return None
-
-
-class _Acks:
-    """The mapper's acknowledgements of this run, kept up to date by the progress subscriber.
-
-    The subscriber hands each sample to ``on_sample`` (a few microseconds under a lock), so
-    acknowledgements never pile up in a channel nobody reads: in real-time playback nothing
-    waits for them, and a full channel would block the session's receiving thread, which then
-    can neither reconnect to a restarted router nor close.
-    """
-
-    def __init__(self, run: str) -> None:
-        self.run = run
-        self.processed = 0
-        self.integrated = 0
-        self.epoch: str | None = None  # the mapper process acknowledging
-        self._changed = threading.Condition()
-        self.last_change = time.monotonic()
-
-    def on_sample(self, sample: zenoh.Sample) -> None:
-        """Zenoh's callback: take one acknowledgement (others' runs and malformed ones ignored)."""
-        try:
-            progress = unpack_progress(sample.payload.to_bytes())
-        except MessageError:
-            return
-        if progress.run != self.run:
-            return
-        with self._changed:
-            # A new mapper process (restarted on its state file) may stand behind the old one:
-            # its word counts, and what it lacks is sent again.
-            if progress.epoch != self.epoch or progress.processed > self.processed:
-                self.epoch = progress.epoch
-                self.processed, self.integrated = progress.processed, progress.integrated
-                self.last_change = time.monotonic()
-                self._changed.notify_all()
-
-    def wait_until(self, processed: int, stall_timeout: float, stop: threading.Event) -> None:
-        """Wait for ``processed`` frames to be acknowledged.
-
-        Frames lost on the way (a detector or the router restarting) come back from the
-        history (``common.history``): the player only waits.
-
-        Raises:
-            PlayerError: no acknowledgement for ``stall_timeout`` s.
-        """
-        with self._changed:
-            while self.processed < processed and not stop.is_set():
-                if time.monotonic() - self.last_change > stall_timeout:
-                    msg = (
-                        f"the mapper acknowledged no frame for {stall_timeout:.0f} s "
-                        f"({self.processed} of {processed} done); is it running?"
-                    )
-                    raise PlayerError(msg)
-                self._changed.wait(STOP_POLL)
 
 
 class _ProgressLine:
@@ -305,7 +250,7 @@ def _play_pass(
     player: PlayerSettings,
     playback: Playback,
     outlet: _Outlet,
-    acks: _Acks,
+    acks: AckWindow,
     stop: threading.Event,
 ) -> float | None:
     """Publish the bag's frames from ``start`` (s) on; returns where to seek to, if asked."""
@@ -352,7 +297,7 @@ def run(
         if placed := bag.placement.describe():
             log.info("%s", placed)
         with open_session(settings) as session:
-            acks = _Acks(run_id)
+            acks = AckWindow(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
             _wait_for_services(session, keys, player.services, player.wait_timeout, stop)
             sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
