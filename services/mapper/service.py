@@ -154,15 +154,7 @@ def run(
     log = setup_logging("mapper")
     keys = Keys(settings.prefix)
     stats = Stats(log)
-    wall_map = state_file.load(mapper.state, mapper.map) if mapper.state else WallMap(mapper.map)
-    if wall_map.walls:
-        log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
-    runs = state_file.load_runs(mapper.state) if mapper.state else []
-    corrector = _corrector(mapper)
-    if corrector is not None:
-        corrector.check(wall_map)
-    core = MapperCore(Mapping(wall_map=wall_map, corrector=corrector), PoseBuffer(mapper.poses),
-                      stats, runs)  # fmt: skip
+    core = _restore(mapper, stats, log)
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
@@ -171,23 +163,17 @@ def run(
         updates = session.declare_publisher(keys.map_updates)
         corrected = _CorrectedPoses(session, keys, log) if core.corrector is not None else None
         ros2 = Ros2Outlet(session, keys) if mapper.ros2_out else None
-
         # With history: a mapper restarted on its state file takes what it missed meanwhile.
-        def missed(what: str) -> Callable[[int], None]:
-            return lambda n: stats.note(
-                f"missed.{what}", what, f"{n} {what} lost for good (past the history window)", n=n
-            )
-
         poses = subscribe_with_history(
             session, pose_key, history,
-            lambda channel: _poses(channel, core, pose_input), missed("poses"),
+            lambda channel: _poses(channel, core, pose_input), _missed(stats, "poses"),
         )  # fmt: skip
         observations = subscribe_with_history(
             session, keys.observations, history,
             lambda channel: _observations(
                 channel, core, progress, mapper.pose_wait, mapper.gap_wait, corrected
             ),
-            missed("observations"),
+            _missed(stats, "observations"),
         )  # fmt: skip
         queryable = session.declare_queryable(keys.map_walls)
         workers = [
@@ -208,6 +194,26 @@ def run(
             worker.join(timeout=5.0)
     _save(core, mapper.state, config)
     return stats
+
+
+def _missed(stats: Stats, what: str) -> Callable[[int], None]:
+    """Counts and says what the history window could not bring back (Zenoh's thread)."""
+    return lambda n: stats.note(
+        f"missed.{what}", what, f"{n} {what} lost for good (past the history window)", n=n
+    )
+
+
+def _restore(mapper: MapperSettings, stats: Stats, log: logging.Logger) -> MapperCore:
+    """The map, each run's progress and the pose correction, from the state file if there is one."""
+    wall_map = state_file.load(mapper.state, mapper.map) if mapper.state else WallMap(mapper.map)
+    if wall_map.walls:
+        log.info("loaded %d walls from %s", len(wall_map.walls), mapper.state)
+    runs = state_file.load_runs(mapper.state) if mapper.state else []
+    corrector = _corrector(mapper)
+    if corrector is not None:
+        corrector.check(wall_map)
+    mapping = Mapping(wall_map=wall_map, corrector=corrector)
+    return MapperCore(mapping, PoseBuffer(mapper.poses), stats, runs)
 
 
 def _corrector(mapper: MapperSettings) -> PoseCorrector | None:

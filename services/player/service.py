@@ -267,6 +267,29 @@ def _play_pass(
     return None
 
 
+def _play(
+    bag: FrameSource,
+    rows: RowSelection | None,
+    player: PlayerSettings,
+    playback: Playback,
+    outlet: _Outlet,
+    acks: AckWindow,
+    stop: threading.Event,
+) -> None:
+    """Play the passes the settings and the controls ask for: once, sought, or in a loop."""
+    position = player.start
+    while not stop.is_set():
+        seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
+        if seek is None and not player.loop and player.fast:
+            acks.wait_until(outlet.published, player.stall_timeout, stop)
+        if seek is not None:
+            position = seek
+        elif player.loop and not stop.is_set():
+            position = player.start
+        else:
+            return
+
+
 def run(
     settings: ZenohSettings,
     recording: Path,
@@ -312,20 +335,10 @@ def run(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
             ).start()
             start_wall = time.monotonic()
-            position = player.start
             with terminal_keys(playback, stop) as interactive:
                 if interactive:
                     print(HELP, file=sys.stderr)
-                while not stop.is_set():
-                    seek = _play_pass(bag, rows, position, player, playback, outlet, acks, stop)
-                    if seek is None and not player.loop and player.fast:
-                        acks.wait_until(outlet.published, player.stall_timeout, stop)
-                    if seek is not None:
-                        position = seek
-                    elif player.loop and not stop.is_set():
-                        position = player.start
-                    else:
-                        break
+                _play(bag, rows, player, playback, outlet, acks, stop)
             outlet.bar.update(outlet.published, force=True)
             if "mapper" in player.services and not player.fast:
                 acks.wait_until(outlet.published, player.stall_timeout, stop)

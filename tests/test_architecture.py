@@ -1,4 +1,5 @@
-"""The package as tools see it: every ``wallmap`` import resolves statically, layers hold.
+"""The house as tools see it: every ``wallmap`` import resolves statically, layers hold, functions
+are short.
 
 The user's layout keeps ``common/`` and ``services/`` at the top of the checkout; the package
 reaches them through the links ``wallmap/common`` and ``wallmap/services``, and the editable
@@ -89,3 +90,16 @@ def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
     assert report["summary"]["filesAnalyzed"] > 50
     assert not unresolved, unresolved
     assert report["summary"]["errorCount"] == 0, report["generalDiagnostics"][:5]
+
+
+def test_no_function_in_common_or_services_is_longer_than_60_lines() -> None:
+    """Readable top to bottom: a function that does not fit on a screen does several jobs."""
+    long = [
+        f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1})"
+        for folder in ("common", "services")
+        for path in (ROOT / folder).rglob("*.py")
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno - node.lineno + 1 > 60
+    ]
+    assert not long, long
