@@ -56,6 +56,13 @@ class RowSelection:
     band: tuple[float, float] | None = None
     row_fraction: float = 0.25
 
+    def __post_init__(self) -> None:
+        if self.band is not None:
+            parse_band(self.band)  # two finite heights, low below high: ValueError otherwise
+        if not 0.0 <= self.row_fraction <= 1.0:
+            msg = f"row_fraction must lie in [0, 1], got {self.row_fraction}"
+            raise ValueError(msg)
+
     def to_map(self) -> dict[str, Any]:
         """What the detector tells players, so they send this row only."""
         band = "auto" if self.band is None else list(self.band)

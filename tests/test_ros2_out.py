@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from wallmap.common.map_query import fetch_map
+from wallmap.common.map_query import MapQuery, fetch_map
+from wallmap.common.map_records import WallRecord
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import ros2_out
@@ -16,10 +17,16 @@ MARKERS = "visualization_msgs/msg/MarkerArray"
 PATH = "nav_msgs/msg/Path"
 
 
+def _wall(wall_id: int, segments) -> WallRecord:
+    cov = ((1e-4, 0.0), (0.0, 1e-4))
+    ends = (segments[0][0], segments[-1][1])
+    return WallRecord(wall_id, 0.0, 0.0, cov, *ends, segments, 5)
+
+
 def test_one_line_list_marker_per_wall_with_its_segments() -> None:
     walls = [
-        {"id": 4, "segments": [[[0.0, 0.0], [1.0, 0.0]], [[2.0, 0.0], [3.5, 0.0]]]},
-        {"id": 9, "segments": [[[1.0, 1.0], [1.0, 2.0]]]},
+        _wall(4, (((0.0, 0.0), (1.0, 0.0)), ((2.0, 0.0), (3.5, 0.0)))),
+        _wall(9, (((1.0, 1.0), (1.0, 2.0)),)),
     ]
     array = ros2_out.decode(ros2_out.markers(walls, [], 12.25, "map"), MARKERS)
     assert [m.id for m in array.markers] == [4, 9]
@@ -34,13 +41,13 @@ def test_one_line_list_marker_per_wall_with_its_segments() -> None:
 
 def test_ids_no_longer_served_get_one_delete() -> None:
     state = ros2_out.MarkerState()
-    seg = [[[0.0, 0.0], [1.0, 0.0]]]
-    state.payload([{"id": 1, "segments": seg}, {"id": 2, "segments": seg}], 1.0, "map")
-    merged = ros2_out.decode(state.payload([{"id": 1, "segments": seg}], 2.0, "map"), MARKERS)
+    seg = (((0.0, 0.0), (1.0, 0.0)),)
+    state.payload([_wall(1, seg), _wall(2, seg)], 1.0, "map")
+    merged = ros2_out.decode(state.payload([_wall(1, seg)], 2.0, "map"), MARKERS)
     actions = {(m.id, m.action) for m in merged.markers}
     delete = merged.markers[0].DELETE
     assert actions == {(1, merged.markers[0].ADD), (2, delete)}
-    again = ros2_out.decode(state.payload([{"id": 1, "segments": seg}], 3.0, "map"), MARKERS)
+    again = ros2_out.decode(state.payload([_wall(1, seg)], 3.0, "map"), MARKERS)
     assert [m.id for m in again.markers] == [1], "a DELETE is said once"
 
 
@@ -71,7 +78,7 @@ def test_a_mapped_bag_comes_out_as_markers_and_a_late_subscriber_gets_them(stack
     assert len(live) >= 2, "published as the map grew"
     assert ros2_out.decode(live[-1], MARKERS).markers
     with open_session(settings) as session:  # comes after the map was published: late
-        reply = fetch_map(session, keys, min_obs=1, trajectory=True)
+        reply = fetch_map(session, keys, MapQuery(trajectory=True))
         got = {}
         for key, msgtype in ((keys.markers, MARKERS), (keys.trajectory, PATH)):
             for answer in session.get(key, timeout=5.0):
@@ -79,10 +86,10 @@ def test_a_mapped_bag_comes_out_as_markers_and_a_late_subscriber_gets_them(stack
                     got[msgtype] = ros2_out.decode(answer.ok.payload.to_bytes(), msgtype)
     array = got[MARKERS]
     added = {m.id: m for m in array.markers if m.action == m.ADD}
-    served = {w["id"]: w for w in reply["walls"]}
+    served = {w.id: w for w in reply.walls}
     assert set(added) == set(served), "one ADD marker per confirmed wall, by id"
     for wall_id, wall in served.items():
         points = np.array([(p.x, p.y) for p in added[wall_id].points])
-        assert np.allclose(points, np.array(wall["segments"]).reshape(-1, 2), atol=1e-3)
+        assert np.allclose(points, np.array(wall.segments).reshape(-1, 2), atol=1e-3)
         assert added[wall_id].header.frame_id == "map"
-    assert len(got[PATH].poses) == len(reply["trajectory"]) > 0
+    assert len(got[PATH].poses) == len(reply.trajectory or ()) > 0

@@ -30,7 +30,8 @@ import pytest
 from conftest import Service, Stack, free_port, wait_for_port
 
 from wallmap.common.codec import MessageError
-from wallmap.common.map_query import fetch_map
+from wallmap.common.map_query import MapQuery, fetch_map
+from wallmap.common.map_records import MapReply, MapUpdate
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.scene import write_scene_bag
@@ -332,7 +333,9 @@ def test_page_draws_the_live_map_of_a_played_scene(stack, browser, tmp_path):
     # The API: the same walls as JSON, the newest pose and observations, errors as JSON.
     settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
     with open_session(settings) as session:
-        trajectory = fetch_map(session, Keys(stack.prefix), trajectory=True)["trajectory"]
+        query = MapQuery(trajectory=True)
+        keyframes = fetch_map(session, Keys(stack.prefix), query).trajectory or ()
+        trajectory = [list(p) for p in keyframes]
     deadline = time.monotonic() + 10  # the view re-reads the trajectory every 2 s
     while True:
         status, kind, body = get(url + "api/map")
@@ -472,28 +475,37 @@ def wall(wall_id: int, y: float, n_obs: int = 3) -> dict[str, Any]:
     }
 
 
+def reply(frames: int, walls: list[dict], trajectory: list) -> MapReply:
+    body = {"frames": frames, "observations": 3 * frames, "walls": walls}
+    return MapReply.from_map({**body, "trajectory": trajectory})
+
+
+def update(frames: int, walls: list[dict], removed: list[int]) -> MapUpdate:
+    return MapUpdate.from_map({"frames": frames, "walls": walls, "removed": removed})
+
+
 def test_api_sends_only_what_changed_and_skips_stale_updates():
     live = LiveMap()
-    live.replace({"frames": 10, "walls": [wall(1, 1.0), wall(2, 2.0)], "trajectory": []})
+    live.replace(reply(10, [wall(1, 1.0), wall(2, 2.0)], []))
     first = live.delta(0)
     assert first["full"]
     assert [w["id"] for w in first["walls"]] == [1, 2]
-    assert live.apply_update({"frames": 12, "walls": [wall(2, 2.1)], "removed": [1]})
+    assert live.apply_update(update(12, [wall(2, 2.1)], [1]))
     changed = live.delta(first["version"])
     assert not changed["full"]
     assert [w["v"] for w in changed["walls"]] == [2.1]
     assert changed["removed"] == [1]
     assert "trajectory" not in changed  # unchanged
     # An update taken before the last full reply would put old walls back: it is skipped.
-    live.replace({"frames": 20, "walls": [wall(2, 2.2)], "trajectory": [[0.0, 0, 0, 0]]})
-    assert not live.apply_update({"frames": 15, "walls": [wall(2, 2.1)], "removed": []})
+    live.replace(reply(20, [wall(2, 2.2)], [[0.0, 0, 0, 0]]))
+    assert not live.apply_update(update(15, [wall(2, 2.1)], []))
     now = live.delta(changed["version"])
     assert [w["v"] for w in now["walls"]] == [2.2]
     assert now["trajectory"] == [[0.0, 0.0, 0.0, 0.0]]
     assert live.delta(now["version"])["walls"] == []
     assert live.delta(now["version"] + 5)["full"]  # a version from another run of the view
-    with pytest.raises(MessageError, match="finite"):
-        live.apply_update({"frames": 30, "walls": [{**wall(3, 1.0), "u": float("nan")}]})
+    with pytest.raises(MessageError, match="finite"):  # refused before it reaches the map
+        update(30, [{**wall(3, 1.0), "u": float("nan")}], [])
     assert live.delta(0)["walls"] == now["walls"]
 
 
