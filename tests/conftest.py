@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+ROOT = Path(__file__).resolve().parents[1]  # the checkout
+REAL_DATA = ROOT.parent / "shared" / "data" / "real"
 
 
 def free_port() -> int:
@@ -203,3 +204,31 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
     finally:
         s.stop_all()
     s.assert_all_clean()
+
+
+@pytest.fixture(scope="session")
+def scene_bags(tmp_path_factory):
+    """Generated scene bags, each written once per test session: ``scene_bags(name, **how)``.
+
+    Unit and end-to-end tests that map the same scene share it (``write_scene_bag``'s arguments).
+    """
+    from wallmap.scene import write_scene_bag
+
+    made = {}
+    folder = tmp_path_factory.mktemp("scenes")
+
+    def scene(name: str, **how):
+        key = (name, tuple(sorted(how.items())))
+        if key not in made:
+            made[key] = write_scene_bag(folder / name, **how)
+        return made[key]
+
+    return scene
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every test under tests/e2e/ runs real processes: marked ``e2e`` (``-m "not e2e"``)."""
+    e2e = Path(__file__).parent / "e2e"
+    for item in items:
+        if e2e in Path(item.fspath).parents:
+            item.add_marker(pytest.mark.e2e)

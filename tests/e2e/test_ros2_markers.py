@@ -1,4 +1,4 @@
-"""ROS 2 out: the map as MarkerArray and Path, CDR by rosbags' typestore, for RViz with no code."""
+"""ROS 2 out through the services: markers of a mapped bag, and a late subscriber gets them."""
 
 from __future__ import annotations
 
@@ -8,55 +8,12 @@ import numpy as np
 import pytest
 
 from wallmap.common.map_query import MapQuery, fetch_map
-from wallmap.common.map_records import WallRecord
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import ros2_out
 
 MARKERS = "visualization_msgs/msg/MarkerArray"
 PATH = "nav_msgs/msg/Path"
-
-
-def _wall(wall_id: int, segments) -> WallRecord:
-    cov = ((1e-4, 0.0), (0.0, 1e-4))
-    ends = (segments[0][0], segments[-1][1])
-    return WallRecord(wall_id, 0.0, 0.0, cov, *ends, segments, 5)
-
-
-def test_one_line_list_marker_per_wall_with_its_segments() -> None:
-    walls = [
-        _wall(4, (((0.0, 0.0), (1.0, 0.0)), ((2.0, 0.0), (3.5, 0.0)))),
-        _wall(9, (((1.0, 1.0), (1.0, 2.0)),)),
-    ]
-    array = ros2_out.decode(ros2_out.markers(walls, [], 12.25, "map"), MARKERS)
-    assert [m.id for m in array.markers] == [4, 9]
-    first = array.markers[0]
-    assert first.ns == "walls"
-    assert first.type == first.LINE_LIST
-    assert first.action == first.ADD
-    assert first.header.frame_id == "map"
-    assert (first.header.stamp.sec, first.header.stamp.nanosec) == (12, 250_000_000)
-    assert [(p.x, p.y) for p in first.points] == [(0, 0), (1, 0), (2, 0), (3.5, 0)]
-
-
-def test_ids_no_longer_served_get_one_delete() -> None:
-    state = ros2_out.MarkerState()
-    seg = (((0.0, 0.0), (1.0, 0.0)),)
-    state.payload([_wall(1, seg), _wall(2, seg)], 1.0, "map")
-    merged = ros2_out.decode(state.payload([_wall(1, seg)], 2.0, "map"), MARKERS)
-    actions = {(m.id, m.action) for m in merged.markers}
-    delete = merged.markers[0].DELETE
-    assert actions == {(1, merged.markers[0].ADD), (2, delete)}
-    again = ros2_out.decode(state.payload([_wall(1, seg)], 3.0, "map"), MARKERS)
-    assert [m.id for m in again.markers] == [1], "a DELETE is said once"
-
-
-def test_the_path_goes_through_the_keyframes() -> None:
-    path = ros2_out.decode(ros2_out.path([[1.0, 0.0, 0.0, 0.0], [2.0, 1.0, 2.0, 1.2]], 2.0), PATH)
-    assert len(path.poses) == 2
-    last = path.poses[1].pose
-    assert (last.position.x, last.position.y) == (1.0, 2.0)
-    assert abs(2 * np.arctan2(last.orientation.z, last.orientation.w) - 1.2) < 1e-9
 
 
 @pytest.mark.e2e

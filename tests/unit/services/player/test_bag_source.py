@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 from bag_records import Record, write_records
+from conftest import REAL_DATA
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
@@ -28,7 +29,7 @@ from wallmap.services.player.pose_sources import (
 )
 
 # shared/ sits beside the repository checkout, locally and in CI.
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+REAL = REAL_DATA
 T0 = 1_700_000_000  # header stamps, seconds
 
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Service, Stack, free_port, wait_for_port
+from conftest import ROOT, Service, Stack, free_port, wait_for_port
 
 from wallmap.common.codec import MessageError
 from wallmap.common.map_query import MapQuery, fetch_map
@@ -40,7 +40,6 @@ from wallmap.view.live import LiveMap
 
 pytestmark = pytest.mark.e2e
 
-ROOT = Path(__file__).resolve().parents[1]
 WIDTH, HEIGHT = 1200, 800
 
 

@@ -1,4 +1,5 @@
-"""Service behaviour over a real router: state across restarts, real-time playback, settings."""
+"""Service behaviour over a real router: state across restarts, real-time playback, updates,
+queries and pictures of the live map."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from wallmap.common.codec import decode
 from wallmap.common.transport import (
     Keys,
     ZenohSettings,
-    make_config,
     open_session,
 )
 from wallmap.scene import write_scene_bag
@@ -63,25 +63,6 @@ def test_real_time_playback_keeps_the_bag_timing_and_loses_nothing_uncounted(sta
     reply, skipped = stack.settled_frames(60)
     assert reply["frames"] + skipped == 60  # integrated, or skipped and counted
     assert skipped <= 6
-
-
-def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):
-    plain = make_config(ZenohSettings(connect=("tcp/127.0.0.1:9",)))
-    assert plain.get_json("scouting/multicast/enabled") == "false"
-    assert plain.get_json("connect/endpoints") == '["tcp/127.0.0.1:9"]'
-    file = tmp_path / "z.json5"
-    file.write_text(
-        "{ connect: { endpoints: ['tcp/127.0.0.1:1'] }, adminspace: { enabled: true } }"
-    )
-    conf = make_config(ZenohSettings(connect=("tcp/127.0.0.1:9",), config_file=file))
-    assert conf.get_json("adminspace/enabled") == "true"
-    assert conf.get_json("connect/endpoints") == '["tcp/127.0.0.1:9"]'
-    assert conf.get_json("scouting/multicast/enabled") == "false"
-    file.write_text("{ scouting: { multicast: { enabled: true } } }")
-    asked = make_config(ZenohSettings(config_file=file))
-    assert asked.get_json("scouting/multicast/enabled") == "true"
-    waiting = make_config(ZenohSettings(wait_for_router=float("inf")))
-    assert waiting.get_json("connect/timeout_ms") == "-1"
 
 
 @pytest.mark.e2e

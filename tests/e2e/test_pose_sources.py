@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -24,7 +25,6 @@ from wallmap.scene import write_scene_bag, write_tum
 
 pytestmark = pytest.mark.e2e
 
-ROOT = Path(__file__).resolve().parents[1]
 N_FRAMES = 450
 STORE = get_typestore(Stores.ROS2_HUMBLE)
 

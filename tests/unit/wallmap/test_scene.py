@@ -2,10 +2,10 @@ import json
 import math
 import time
 from collections import Counter, defaultdict
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from rosbags.highlevel import AnyReader
 
 from wallmap.scene import (
@@ -42,7 +42,7 @@ from wallmap.scene import (
 from wallmap.scene.floorplan import point_segment_distance, segment_distances
 
 SEEDS = [0, 1, 2, 3, 11, 42]
-SAMPLE_TRUTH = Path(__file__).parents[1] / "wallmap" / "data" / "sample.bag.truth.json"
+SAMPLE_TRUTH = ROOT / "wallmap" / "data" / "sample.bag.truth.json"
 
 
 def wall_angles_deg(plan):

@@ -1,7 +1,7 @@
 """The odometry service: poses from the scans, held onto the map by its walls.
 
 In one process (`wallmap.offline.map_bag` runs the service's tracker) on a generated lidar scene
-with drifting wheel odometry and ground truth, then as real processes on the same scene.
+with drifting wheel odometry and ground truth.
 """
 
 from __future__ import annotations
@@ -17,18 +17,17 @@ from wallmap.common.map_records import WallRecord
 from wallmap.config import configured
 from wallmap.evaluation import MapScore, evaluate_map
 from wallmap.offline import map_bag, walls
-from wallmap.scene import load_truth, write_scene_bag
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker, wall_lines
 
 N_FRAMES = 300
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    bag = tmp_path_factory.mktemp("odometry") / "lidar.bag"
-    info = write_scene_bag(bag, seed=606, n_frames=N_FRAMES, fmt="ros1", sensor="laserscan")
-    plan, trajectory, seen = load_truth(info.truth_path)
-    return bag, plan, trajectory, seen
+def scene(scene_bags):
+    """A lidar scene with drifting wheel odometry (shared by the odometry's tests)."""
+    info = scene_bags("odometry-lidar.bag", seed=606, n_frames=N_FRAMES, fmt="ros1",
+                      sensor="laserscan")  # fmt: skip
+    return info.path, info.plan, info.trajectory, info.seen_counts
 
 
 def _mapped(scene, *settings: str) -> tuple[MapScore, float]:
@@ -86,40 +85,3 @@ def test_tracker_takes_settled_walls_and_refuses_malformed_ones() -> None:
     np.testing.assert_allclose(abs(lines[0].normal), [0.0, 1.0])
     tracker.set_walls([], removed=[1])
     assert tracker.wall_count == 0
-
-
-def test_odometry_service_gives_the_mapper_its_poses(stack, scene) -> None:
-    """Player without poses, the odometry service as the pose source: the map is right."""
-    bag, plan, trajectory, seen = scene
-    x, y, yaw = trajectory.pose_at(0)
-    for service, *extra in (
-        ("mapper",),
-        ("detector",),
-        ("odometry", f"--initial-pose={x},{y},{yaw}"),
-    ):
-        stack.start(service, service, *extra, *stack.zenoh_args)
-    played = stack.run(
-        "player", str(bag), "--fast", "--pose-source", "none",
-        "--wait-for", "detector,mapper,odometry", *stack.zenoh_args,
-    )  # fmt: skip
-    assert played.returncode == 0, played.stderr
-    assert f"published {N_FRAMES} frames and 0 poses" in played.stdout
-    reply = stack.query("--min-obs", "3")
-    assert reply["frames"] == N_FRAMES
-    score = evaluate_map(reply["walls"], plan, seen)
-    print(f"\n{score.summary()}")
-    assert score.precision >= 0.9  # 16 of 17 here, as in one process
-    assert score.recall >= 0.95
-    assert score.median_offset_m < 0.02
-
-
-def test_odometry_command_line_errors(stack) -> None:
-    bad = stack.run("odometry", "--initial-pose", "1,2", *stack.zenoh_args, timeout=30, expect=2)
-    assert "expected X,Y,YAW" in bad.stderr
-    assert len(bad.stderr.strip().splitlines()) == 1
-    clash = stack.run(
-        "up", "missing.bag", "--odometry", "--pose-source", "odom", *stack.zenoh_args, timeout=30,
-        expect=None,
-    )  # fmt: skip
-    assert clash.returncode != 0
-    assert "--odometry estimates the poses itself" in clash.stderr

@@ -18,14 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import free_port, run_wallmap, wait_for_port
+from conftest import ROOT, free_port, run_wallmap, wait_for_port
 
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import load_truth, write_scene_bag
 
 pytestmark = pytest.mark.e2e
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_demo_maps_the_sample_bag_and_draws_it(tmp_path):

@@ -1,0 +1,54 @@
+"""The odometry service as a process: the mapper's poses from the scans, and its flags' errors."""
+
+from __future__ import annotations
+
+import pytest
+
+from wallmap.evaluation import evaluate_map
+
+N_FRAMES = 300
+
+
+@pytest.fixture(scope="module")
+def scene(scene_bags):
+    """A lidar scene with drifting wheel odometry (shared by the odometry's tests)."""
+    info = scene_bags("odometry-lidar.bag", seed=606, n_frames=N_FRAMES, fmt="ros1",
+                      sensor="laserscan")  # fmt: skip
+    return info.path, info.plan, info.trajectory, info.seen_counts
+
+
+def test_odometry_service_gives_the_mapper_its_poses(stack, scene) -> None:
+    """Player without poses, the odometry service as the pose source: the map is right."""
+    bag, plan, trajectory, seen = scene
+    x, y, yaw = trajectory.pose_at(0)
+    for service, *extra in (
+        ("mapper",),
+        ("detector",),
+        ("odometry", f"--initial-pose={x},{y},{yaw}"),
+    ):
+        stack.start(service, service, *extra, *stack.zenoh_args)
+    played = stack.run(
+        "player", str(bag), "--fast", "--pose-source", "none",
+        "--wait-for", "detector,mapper,odometry", *stack.zenoh_args,
+    )  # fmt: skip
+    assert played.returncode == 0, played.stderr
+    assert f"published {N_FRAMES} frames and 0 poses" in played.stdout
+    reply = stack.query("--min-obs", "3")
+    assert reply["frames"] == N_FRAMES
+    score = evaluate_map(reply["walls"], plan, seen)
+    print(f"\n{score.summary()}")
+    assert score.precision >= 0.9  # 16 of 17 here, as in one process
+    assert score.recall >= 0.95
+    assert score.median_offset_m < 0.02
+
+
+def test_odometry_command_line_errors(stack) -> None:
+    bad = stack.run("odometry", "--initial-pose", "1,2", *stack.zenoh_args, timeout=30, expect=2)
+    assert "expected X,Y,YAW" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
+    clash = stack.run(
+        "up", "missing.bag", "--odometry", "--pose-source", "odom", *stack.zenoh_args, timeout=30,
+        expect=None,
+    )  # fmt: skip
+    assert clash.returncode != 0
+    assert "--odometry estimates the poses itself" in clash.stderr

@@ -1,0 +1,79 @@
+"""`--slam`: drifting wheel odometry corrected by the walls, depth cameras and lidars alike.
+
+The generated scenes record, besides the true poses, an odometry that drifts (scale error, slip
+and a heading error per metre, growing slowly) on /odom; the robot drives a loop through the
+rooms. Mapped from /odom alone the map is unusable; with --slam it must match the truth and the
+corrected trajectory must follow the true one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wallmap.config import configured
+from wallmap.evaluation import evaluate_map
+from wallmap.offline import map_bag, walls
+
+N_FRAMES = 600
+
+
+def _trajectory_error(poses, trajectory) -> float:
+    """RMS position error of ``poses`` against the true trajectory, at their stamps (m)."""
+    stamps = [p.stamp for p in poses]
+    x = np.interp(stamps, trajectory.stamps, trajectory.x)
+    y = np.interp(stamps, trajectory.stamps, trajectory.y)
+    dx, dy = np.array([p.x for p in poses]) - x, np.array([p.y for p in poses]) - y
+    return float(np.sqrt(np.mean(dx**2 + dy**2)))
+
+
+@pytest.fixture(scope="module")
+def scenes(scene_bags):
+    return {
+        "depth": scene_bags(
+            "slam-depth.bag", seed=500, n_frames=N_FRAMES, fmt="ros1", sensor="depth16"
+        ),
+        "lidar": scene_bags(
+            "slam-lidar.bag", seed=501, n_frames=N_FRAMES, fmt="ros1", sensor="laserscan"
+        ),
+        "cloud": scene_bags(
+            "slam-cloud.bag", seed=502, n_frames=N_FRAMES, fmt="ros1", sensor="pointcloud"
+        ),
+    }
+
+
+FLOOR = {"depth": 0.9, "lidar": 0.9, "cloud": 0.85}
+
+
+@pytest.mark.parametrize("sensor", ["depth", "lidar", "cloud"])
+def test_walls_correct_drifting_odometry(scenes, sensor) -> None:
+    scene = scenes[sensor]
+    drifting: list = []
+    plain = map_bag(scene.path, configured("player.source.pose_source=odom"), poses=drifting)
+    corrected: list = []
+    slam = map_bag(
+        scene.path,
+        configured("player.source.pose_source=odom", "mapper.slam.enabled=true"),
+        poses=corrected,
+    )
+    before = evaluate_map(walls(plain, 3), scene.plan, scene.seen_counts)
+    after = evaluate_map(walls(slam, 3), scene.plan, scene.seen_counts)
+    error_before = _trajectory_error(drifting, scene.trajectory)
+    error_after = _trajectory_error(corrected, scene.trajectory)
+    print(f"\nodom:  {before.summary()}; trajectory {error_before:.3f} m")
+    print(f"slam:  {after.summary()}; trajectory {error_after:.3f} m")
+    assert before.precision < 0.6, "the odometry drifts enough to matter"
+    assert after.precision >= FLOOR[sensor]
+    assert after.recall >= FLOOR[sensor]
+    assert after.duplicates == 0
+    assert after.median_offset_m <= 0.05
+    assert error_after < error_before / 3
+    assert len(corrected) == N_FRAMES, "every frame integrated"
+
+
+def test_without_slam_the_poses_are_used_as_they_come(scenes) -> None:
+    scene = scenes["depth"]
+    used: list = []
+    map_bag(scene.path, configured("player.source.pose_source=odom"), poses=used)
+    assert all(p.cov is None or p.cov.shape == (3, 3) for p in used)
+    assert _trajectory_error(used, scene.trajectory) > 0.3, "raw odometry: the drift stays"
