@@ -11,7 +11,7 @@ and the poses with the odometry, with scan matching alone, and with scan matchin
 mapped walls.
 
 Both run the services' code in one process (`wallmap.offline.map_bag`, the walls fed back after
-every frame); tests/test_real_data.py runs the same bags through the real services.
+every frame); tests/e2e/test_real_data.py runs the same bags through the real services.
 
     .venv/bin/python benchmarks/real_data.py [--out docs/figures] [--seeds 600,601,602]
 """

@@ -8,7 +8,7 @@ those points. The ways: the TUM folder itself (6-DoF camera trajectory, frame no
 bag with a 6-DoF tf `map -> camera_link`; a ROS 1 bag with a planar `map -> base_link` and a
 tilting `base_link -> camera_link` on /tf (made from the folder, levelled as wallmap levels it).
 
-Runs the services' code in one process (`wallmap.offline.map_bag`); tests/test_real_rgbd.py
+Runs the services' code in one process (`wallmap.offline.map_bag`); tests/e2e/test_real_rgbd.py
 runs the same recordings through the real services.
 
     .venv/bin/python benchmarks/real_rgbd.py [--out docs/figures]

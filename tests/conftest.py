@@ -232,3 +232,18 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if e2e in Path(item.fspath).parents:
             item.add_marker(pytest.mark.e2e)
+
+
+@pytest.fixture(scope="session")
+def handheld_recordings(tmp_path_factory):
+    """The handheld kitchen, three ways (``handheld_scenes``), written once per session."""
+    from handheld_scenes import write_all
+
+    return write_all(tmp_path_factory.mktemp("handheld"))
+
+
+@pytest.fixture(scope="session")
+def odometry_scene(scene_bags):
+    """A lidar scene with drifting wheel odometry: (bag, plan, trajectory, seen counts)."""
+    info = scene_bags("odometry-lidar.bag", seed=606, n_frames=300, fmt="ros1", sensor="laserscan")
+    return info.path, info.plan, info.trajectory, info.seen_counts

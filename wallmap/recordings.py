@@ -5,7 +5,7 @@ trajectory, often in a frame that is not level), a bag whose tf gives the camera
 (``map -> camera_link``, as a SLAM or a reconstruction system publishes it), or a bag from a robot
 (a planar ``map -> base_link`` and the camera on a tilting mount, ``base_link -> camera_link`` on
 /tf). ``tum_as_bag`` writes the two bags from a folder, so that the three can be compared on the
-same frames (``benchmarks/real_rgbd.py``, ``tests/test_real_rgbd.py``).
+same frames (``benchmarks/real_rgbd.py``, ``tests/e2e/test_real_rgbd.py``).
 """
 
 from __future__ import annotations

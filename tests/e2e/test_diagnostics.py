@@ -7,21 +7,11 @@ import time
 import numpy as np
 import pytest
 import zenoh
+from rows import wall_stub_strays
 
 from wallmap.common.codec import decode
 from wallmap.common.messages import Frame, pack
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-
-
-def _row() -> np.ndarray:
-    """A 3 m wall 2 m ahead, a NaN, a 10 cm stub of 15 points, a NaN, and 5 stray points."""
-    rng = np.random.default_rng(4)
-    wall = np.column_stack([np.full(150, 2.0), np.linspace(-1.5, 1.5, 150)])
-    stub = np.column_stack([np.full(15, 3.0), np.linspace(2.0, 2.1, 15)])
-    strays = rng.uniform(4, 5, (5, 2))
-    gap = np.full((1, 2), np.nan)
-    row = np.vstack([wall, gap, stub, gap, strays])
-    return row + rng.normal(0, 0.002, row.shape) * [1, 0]
 
 
 @pytest.mark.e2e
@@ -29,7 +19,7 @@ def test_detector_publishes_diagnostics_per_frame(stack) -> None:
     keys = Keys(stack.prefix)
     settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
     stack.start("detector", "detector", *stack.zenoh_args)
-    row = _row()
+    row = wall_stub_strays()
     points = np.column_stack([row, np.zeros(len(row))]).astype(np.float32)[None]
     with open_session(settings) as session:
         diagnostics = session.declare_subscriber(

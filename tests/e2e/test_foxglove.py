@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 from conftest import Service, Stack, free_port, wait_for_port
+from foxglove_wire import decode, descriptor_types, one, stamp_ns
 
 from wallmap.scene import write_scene_bag
 
@@ -27,77 +28,6 @@ SCHEMAS = {
     "/wallmap/observations": "foxglove.SceneUpdate",
     "/wallmap/trajectory": "foxglove.PosesInFrame",
 }
-
-
-def _varint(data: bytes, i: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte = data[i]
-        i += 1
-        value |= (byte & 0x7F) << shift
-        shift += 7
-        if byte < 0x80:
-            return value, i
-
-
-def _wire(data: bytes) -> dict[int, list[Any]]:
-    """Field number -> raw values (ints, doubles, or bytes for length-delimited fields)."""
-    out: dict[int, list[Any]] = defaultdict(list)
-    i = 0
-    while i < len(data):
-        key, i = _varint(data, i)
-        kind = key & 7
-        if kind == 0:
-            value, i = _varint(data, i)
-        elif kind == 1:
-            value, i = struct.unpack_from("<d", data, i)[0], i + 8
-        elif kind == 2:
-            n, i = _varint(data, i)
-            value, i = data[i : i + n], i + n
-        elif kind == 5:
-            value, i = struct.unpack_from("<f", data, i)[0], i + 4
-        else:
-            raise ValueError(f"wire type {kind}")
-        out[key >> 3].append(value)
-    return out
-
-
-Types = dict[str, dict[int, tuple[str, int, str]]]
-
-
-def _types(schema_data: bytes) -> Types:
-    """Message name -> field number -> (name, type, message type) from a FileDescriptorSet."""
-    types: Types = {}
-    for file in map(_wire, _wire(schema_data)[1]):
-        package = file[2][0].decode() if file[2] else ""
-        for message in map(_wire, file[4]):
-            types[f"{package}.{message[1][0].decode()}"] = {
-                f[3][0]: (f[1][0].decode(), f[5][0], f[6][0].decode().lstrip(".") if f[6] else "")
-                for f in map(_wire, message[2])
-            }
-    return types
-
-
-def _decode(data: bytes, name: str, types: Types) -> dict[str, list[Any]]:
-    """A message as field name -> values (always a list; proto3 leaves zeros out)."""
-    out: dict[str, list[Any]] = defaultdict(list)
-    for number, values in _wire(data).items():
-        field, kind, message = types[name][number]
-        for value in values:
-            if kind == 11:  # a message
-                out[field].append(_decode(value, message, types))
-            else:
-                out[field].append(value.decode() if kind == 9 else value)
-    return out
-
-
-def _one(message: dict[str, list[Any]], field: str) -> Any:
-    return message[field][0] if message[field] else 0
-
-
-def _ns(message: dict[str, list[Any]]) -> int:
-    stamp = _one(message, "timestamp")
-    return _one(stamp, "seconds") * 1_000_000_000 + _one(stamp, "nanos")
 
 
 def _without_foxglove(*argv: str) -> subprocess.CompletedProcess[str]:
@@ -215,10 +145,10 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
         assert set(topics) == set(SCHEMAS) - {"/wallmap/trajectory"}  # no path before the run
         for topic, schema in topics.items():
             assert (schema.name, schema.encoding) == (SCHEMAS[topic], "protobuf")
-        types = {name: _types(schema.data) for name, schema in topics.items()}
+        types = {name: descriptor_types(schema.data) for name, schema in topics.items()}
         messages: dict[str, list[tuple[int, dict[str, list[Any]]]]] = defaultdict(list)
         for schema, channel, message in mcap.iter_messages(log_time_order=False):
-            decoded = _decode(message.data, schema.name, types[channel.topic])
+            decoded = decode(message.data, schema.name, types[channel.topic])
             messages[channel.topic].append((message.log_time, decoded))
 
     assert len(messages["/wallmap/pose"]) == poses  # one per frame
@@ -230,12 +160,12 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
         if topic != "/wallmap/walls":
             assert len(set(times)) == len(times), topic  # ...one per stamp
     pose_time, pose = messages["/wallmap/pose"][-1]
-    assert _ns(pose) == pose_time  # log time = the message's stamp
+    assert stamp_ns(pose) == pose_time  # log time = the message's stamp
     _, last = messages["/wallmap/walls"][-1]
-    ids = {_one(e, "id") for e in last["entities"]}
+    ids = {one(e, "id") for e in last["entities"]}
     assert ids == {f"wall/{w['id']}" for w in walls}
     confirmed = {
-        _one(e, "id")
+        one(e, "id")
         for e in last["entities"]
         if {"key": ["tentative"], "value": ["false"]} in e["metadata"]
     }
@@ -265,8 +195,8 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
                 pass
             opcode, subscription, log_time = struct.unpack_from("<BIQ", frame[1])
             assert (opcode, subscription) == (1, 7)
-            scene = _decode(frame[1][13:], "foxglove.SceneUpdate", types["/wallmap/walls"])
-            assert {_one(e, "id") for e in scene["entities"]} == ids
+            scene = decode(frame[1][13:], "foxglove.SceneUpdate", types["/wallmap/walls"])
+            assert {one(e, "id") for e in scene["entities"]} == ids
             assert log_time == messages["/wallmap/walls"][-1][0]
     live.terminate()
     assert live.wait(timeout=15) == 0

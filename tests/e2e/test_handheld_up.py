@@ -8,48 +8,15 @@ import shutil
 import numpy as np
 import pytest
 from conftest import free_port, run_wallmap
+from handheld_scenes import TUM, score
 from PIL import Image
 
-from wallmap.config import configured
-from wallmap.evaluation import evaluate_map
-from wallmap.scene import SCENE_KINDS, Camera, Handheld, write_handheld_recording
 from wallmap.services.player.tum_folder import read_depth_png
-
-SEED = 41
-CAMERA = Camera(width=128, height=96)
-
-
-HANDHELD = Handheld(frame_tilt_deg=30.0, floor_z=-1.3)
-
-
-TUM = configured(
-    f"player.source.intrinsics={[CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy]}",
-    "player.source.depth_scale=1000",
-)
-
-
-@pytest.fixture(scope="module")
-def recordings(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("handheld")
-    plan = SCENE_KINDS["kitchen"].plan(SEED)
-    made = {}
-    for style in ("camera", "robot", "tum"):
-        path = folder / (style if style == "tum" else f"{style}.bag")
-        made[style] = write_handheld_recording(
-            path, seed=SEED, n_frames=500, style=style, plan=plan, handheld=HANDHELD, camera=CAMERA
-        )
-    return made
-
-
-def score(info, reply_walls):
-    result = evaluate_map(reply_walls, info.plan, info.seen_counts)
-    print(f"\n{info.path.name}: {result.summary()}")
-    return result
 
 
 @pytest.mark.e2e
-def test_up_plays_a_tum_folder_through_the_services(recordings, tmp_path):
-    info = recordings["tum"]
+def test_up_plays_a_tum_folder_through_the_services(handheld_recordings, tmp_path):
+    info = handheld_recordings["tum"]
     out = tmp_path / "map.json"
     fx, fy, cx, cy = TUM.player.source.intrinsics
     done = run_wallmap(
@@ -63,8 +30,8 @@ def test_up_plays_a_tum_folder_through_the_services(recordings, tmp_path):
     assert "walls from" in done.stdout
 
 
-def test_a_broken_tum_folder_is_one_line(recordings, tmp_path):
-    good = recordings["tum"].path
+def test_a_broken_tum_folder_is_one_line(handheld_recordings, tmp_path):
+    good = handheld_recordings["tum"].path
     broken = tmp_path / "broken"
     shutil.copytree(good, broken)
     (broken / "depth.txt").write_text("1.0 depth/a.png\nnot-a-stamp depth/b.png\n")

@@ -2,24 +2,14 @@
 
 from __future__ import annotations
 
-import pytest
-
 from wallmap.evaluation import evaluate_map
 
-N_FRAMES = 300
+N_FRAMES = 300  # conftest.odometry_scene's frames
 
 
-@pytest.fixture(scope="module")
-def scene(scene_bags):
-    """A lidar scene with drifting wheel odometry (shared by the odometry's tests)."""
-    info = scene_bags("odometry-lidar.bag", seed=606, n_frames=N_FRAMES, fmt="ros1",
-                      sensor="laserscan")  # fmt: skip
-    return info.path, info.plan, info.trajectory, info.seen_counts
-
-
-def test_odometry_service_gives_the_mapper_its_poses(stack, scene) -> None:
+def test_odometry_service_gives_the_mapper_its_poses(stack, odometry_scene) -> None:
     """Player without poses, the odometry service as the pose source: the map is right."""
-    bag, plan, trajectory, seen = scene
+    bag, plan, trajectory, seen = odometry_scene
     x, y, yaw = trajectory.pose_at(0)
     for service, *extra in (
         ("mapper",),

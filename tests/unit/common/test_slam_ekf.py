@@ -6,22 +6,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numeric import numeric_jacobian
 
 from wallmap.common import se2, slam_ekf, wall_model
 from wallmap.common.slam_ekf import OdometryNoise
 
 NOISE = OdometryNoise()
 DRIFT = (0.005, math.radians(0.2))
-
-
-def _numeric(f, x: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    cols = []
-    for i in range(len(x)):
-        d = np.zeros_like(x)
-        d[i] = eps
-        diff = f(x + d) - f(x - d)
-        cols.append(diff / (2 * eps))
-    return np.column_stack(cols)
 
 
 def _state(rng: np.random.Generator, walls: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +36,7 @@ def test_calibrated_step_jacobian_matches_numeric_differentiation() -> None:
     for _ in range(20):
         step = rng.uniform([-0.2, -0.2, -0.3], [0.2, 0.2, 0.3])
         cal = rng.normal(0, [0.03, 0.02])
-        numeric = _numeric(lambda c, step=step: slam_ekf.calibrated(step, c), cal)
+        numeric = numeric_jacobian(lambda c, step=step: slam_ekf.calibrated(step, c), cal)
         assert np.allclose(slam_ekf.calibrated_jacobian(step), numeric, atol=1e-7)
 
 
@@ -61,7 +52,7 @@ def test_prediction_moves_the_covariance_with_the_jacobian_of_the_motion() -> No
             out[:3] = se2.compose(v[:3], slam_ekf.calibrated(step, v[3:5]))
             return out
 
-        f = _numeric(move, x)
+        f = numeric_jacobian(move, x)
         x_new, p_new = slam_ekf.predict(x, p, step, NOISE, DRIFT)
         assert np.allclose(x_new, move(x))
         q = p_new - f @ p @ f.T
@@ -83,7 +74,7 @@ def test_a_new_wall_carries_the_correlations_of_the_pose_that_saw_it() -> None:
         s = (n @ (t - anchor) + np.linalg.norm(zz)) * n  # the line, from the fixed anchor
         return np.concatenate([v[:-2], s])
 
-    j = _numeric(grown, np.concatenate([x, z]))
+    j = numeric_jacobian(grown, np.concatenate([x, z]))
     joint = np.zeros((len(x) + 2, len(x) + 2))
     joint[: len(x), : len(x)], joint[len(x) :, len(x) :] = p, r
     assert np.allclose(x_new, grown(np.concatenate([x, z])))
@@ -96,7 +87,7 @@ def test_the_innovation_jacobian_matches_numeric_differentiation() -> None:
     anchor = np.array([0.5, -0.2])
     innov = slam_ekf.innovation(x, p, 1, anchor, np.array([1.0, 1.0]), np.eye(2) * 1e-3)
     sub = np.concatenate([x[:3], x[slam_ekf.wall_slice(1)]])
-    numeric = _numeric(lambda v: wall_model.predict(v[3:], anchor, v[:3]), sub)
+    numeric = numeric_jacobian(lambda v: wall_model.predict(v[3:], anchor, v[:3]), sub)
     assert np.allclose(innov.jacobian, numeric, atol=1e-6)
 
 

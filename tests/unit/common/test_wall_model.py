@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from numeric import numeric_jacobian
 
 from wallmap.common import ekf, se2, wall_model
 
@@ -20,16 +21,6 @@ def wall_from_points(p0, p1, anchor):
     d = (p1 - p0) / np.linalg.norm(p1 - p0)
     foot = p0 + ((anchor - p0) @ d) * d
     return foot - anchor
-
-
-def numeric_jacobian(f, x, eps=1e-6):
-    x = np.asarray(x, float)
-    cols = []
-    for i in range(len(x)):
-        dx = np.zeros_like(x)
-        dx[i] = eps
-        cols.append((f(x + dx) - f(x - dx)) / (2 * eps))
-    return np.column_stack(cols)
 
 
 RNG = np.random.default_rng(7)

@@ -8,96 +8,24 @@ tests read fields by their Foxglove names.
 from __future__ import annotations
 
 import math
-import struct
-from collections import defaultdict
 from typing import Any
 
 import numpy as np
 import pytest
+from foxglove_wire import decode, descriptor_types, one, stamp_ns
 
 from wallmap.common.map_records import MapReply, MapUpdate
 from wallmap.common.messages import Observations, Pose, WallObservation
 
 
-def _varint(data: bytes, i: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        byte = data[i]
-        i += 1
-        value |= (byte & 0x7F) << shift
-        shift += 7
-        if byte < 0x80:
-            return value, i
-
-
-def _wire(data: bytes) -> dict[int, list[Any]]:
-    """Field number -> raw values (ints, doubles, or bytes for length-delimited fields)."""
-    out: dict[int, list[Any]] = defaultdict(list)
-    i = 0
-    while i < len(data):
-        key, i = _varint(data, i)
-        kind = key & 7
-        if kind == 0:
-            value, i = _varint(data, i)
-        elif kind == 1:
-            value, i = struct.unpack_from("<d", data, i)[0], i + 8
-        elif kind == 2:
-            n, i = _varint(data, i)
-            value, i = data[i : i + n], i + n
-        elif kind == 5:
-            value, i = struct.unpack_from("<f", data, i)[0], i + 4
-        else:
-            raise ValueError(f"wire type {kind}")
-        out[key >> 3].append(value)
-    return out
-
-
-Types = dict[str, dict[int, tuple[str, int, str]]]
-
-
-def _types(schema_data: bytes) -> Types:
-    """Message name -> field number -> (name, type, message type) from a FileDescriptorSet."""
-    types: Types = {}
-    for file in map(_wire, _wire(schema_data)[1]):
-        package = file[2][0].decode() if file[2] else ""
-        for message in map(_wire, file[4]):
-            types[f"{package}.{message[1][0].decode()}"] = {
-                f[3][0]: (f[1][0].decode(), f[5][0], f[6][0].decode().lstrip(".") if f[6] else "")
-                for f in map(_wire, message[2])
-            }
-    return types
-
-
-def _decode(data: bytes, name: str, types: Types) -> dict[str, list[Any]]:
-    """A message as field name -> values (always a list; proto3 leaves zeros out)."""
-    out: dict[str, list[Any]] = defaultdict(list)
-    for number, values in _wire(data).items():
-        field, kind, message = types[name][number]
-        for value in values:
-            if kind == 11:  # a message
-                out[field].append(_decode(value, message, types))
-            else:
-                out[field].append(value.decode() if kind == 9 else value)
-    return out
-
-
-def _one(message: dict[str, list[Any]], field: str) -> Any:
-    return message[field][0] if message[field] else 0
-
-
-def _ns(message: dict[str, list[Any]]) -> int:
-    stamp = _one(message, "timestamp")
-    return _one(stamp, "seconds") * 1_000_000_000 + _one(stamp, "nanos")
-
-
 def _xyz(point: dict[str, list[Any]]) -> tuple[float, float, float]:
-    return _one(point, "x"), _one(point, "y"), _one(point, "z")
+    return one(point, "x"), one(point, "y"), one(point, "z")
 
 
 def _fox(message: Any) -> dict[str, list[Any]]:
     """A foxglove message object, encoded and read back."""
     schema = message.get_schema()
-    return _decode(message.encode(), schema.name, _types(schema.data))
+    return decode(message.encode(), schema.name, descriptor_types(schema.data))
 
 
 def _wall(wall_id: int, *, tentative: bool = False, x: float = 1.0) -> dict[str, Any]:
@@ -138,15 +66,15 @@ def test_a_pose_becomes_a_pose_in_frame_and_a_transform() -> None:
     assert [o.topic for o in outs] == ["/wallmap/pose", "/tf"]
     assert {o.log_time for o in outs} == {5_250_000_000}
     pose = _fox(outs[0].message)
-    assert _one(pose, "frame_id") == "map"
-    assert _ns(pose) == 5_250_000_000
-    assert _xyz(_one(_one(pose, "pose"), "position")) == (1.0, 2.0, 0.0)
-    q = _one(_one(pose, "pose"), "orientation")
-    assert _one(q, "z") == pytest.approx(math.sqrt(0.5))
-    assert _one(q, "w") == pytest.approx(math.sqrt(0.5))
+    assert one(pose, "frame_id") == "map"
+    assert stamp_ns(pose) == 5_250_000_000
+    assert _xyz(one(one(pose, "pose"), "position")) == (1.0, 2.0, 0.0)
+    q = one(one(pose, "pose"), "orientation")
+    assert one(q, "z") == pytest.approx(math.sqrt(0.5))
+    assert one(q, "w") == pytest.approx(math.sqrt(0.5))
     (tf,) = _fox(outs[1].message)["transforms"]
-    assert (_one(tf, "parent_frame_id"), _one(tf, "child_frame_id")) == ("map", "base_link")
-    assert _xyz(_one(tf, "translation")) == (1.0, 2.0, 0.0)
+    assert (one(tf, "parent_frame_id"), one(tf, "child_frame_id")) == ("map", "base_link")
+    assert _xyz(one(tf, "translation")) == (1.0, 2.0, 0.0)
 
 
 def test_every_wall_map_message_is_the_whole_map() -> None:
@@ -164,27 +92,27 @@ def test_every_wall_map_message_is_the_whole_map() -> None:
     ]
     assert len(_fox(outs[0].message)["poses"]) == 2
     scene = _fox(outs[1].message)
-    assert _one(_one(scene, "deletions"), "type") == 1  # ALL: the message replaces the scene
+    assert one(one(scene, "deletions"), "type") == 1  # ALL: the message replaces the scene
     first, second = scene["entities"]
-    assert [_one(e, "id") for e in (first, second)] == ["wall/1", "wall/2"]
-    metadata = {_one(kv, "key"): _one(kv, "value") for kv in first["metadata"]}
+    assert [one(e, "id") for e in (first, second)] == ["wall/1", "wall/2"]
+    metadata = {one(kv, "key"): one(kv, "value") for kv in first["metadata"]}
     assert metadata["id"] == "1"
     assert metadata["tentative"] == "false"
-    assert _one(_one(first, "texts"), "text") == "1"
+    assert one(one(first, "texts"), "text") == "1"
     (line,) = first["lines"]
-    assert _one(line, "type") == 2  # LINE_LIST: one pair of points per segment
+    assert one(line, "type") == 2  # LINE_LIST: one pair of points per segment
     assert [_xyz(p)[:2] for p in line["points"]] == [
         (1.0, -1.0),
         (1.0, 0.5),
         (1.0, 1.0),
         (1.0, 2.0),
     ]
-    assert _one(second["lines"][0], "color") != _one(line, "color")  # tentative stands out
+    assert one(second["lines"][0], "color") != one(line, "color")  # tentative stands out
 
     update = {"frames": 12, "stamp": 4.0, "walls": [_wall(3, x=2.0)], "removed": [1]}
     (out,) = bridge.map_update(MapUpdate.from_map(update))
     assert out.log_time == 4_000_000_000
-    assert [_one(e, "id") for e in _fox(out.message)["entities"]] == ["wall/2", "wall/3"]
+    assert [one(e, "id") for e in _fox(out.message)["entities"]] == ["wall/2", "wall/3"]
     assert set(bridge.latest) == {"/wallmap/walls", "/wallmap/trajectory"}
     assert bridge.latest["/wallmap/walls"] is out
 
@@ -210,8 +138,8 @@ def test_observations_are_placed_with_the_pose_at_their_stamp() -> None:
         assert out.topic == "/wallmap/observations"
         assert out.log_time == fb.nanoseconds(stamp)
         (entity,) = _fox(out.message)["entities"]
-        assert _one(entity, "frame_id") == "map"
-        return [tuple(round(c, 9) for c in _xyz(p)) for p in _one(entity, "lines")["points"]]
+        assert one(entity, "frame_id") == "map"
+        return [tuple(round(c, 9) for c in _xyz(p)) for p in one(entity, "lines")["points"]]
 
     # At 0.1 the robot was at x = 1 facing +y: base (1, 0) is map (1, 1), base (1, 1) is (0, 1).
     assert points(0.1) == [(1.0, 1.0, 0.02), (0.0, 1.0, 0.02)]

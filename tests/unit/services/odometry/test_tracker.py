@@ -19,20 +19,10 @@ from wallmap.evaluation import MapScore, evaluate_map
 from wallmap.offline import map_bag, walls
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker, wall_lines
 
-N_FRAMES = 300
 
-
-@pytest.fixture(scope="module")
-def scene(scene_bags):
-    """A lidar scene with drifting wheel odometry (shared by the odometry's tests)."""
-    info = scene_bags("odometry-lidar.bag", seed=606, n_frames=N_FRAMES, fmt="ros1",
-                      sensor="laserscan")  # fmt: skip
-    return info.path, info.plan, info.trajectory, info.seen_counts
-
-
-def _mapped(scene, *settings: str) -> tuple[MapScore, float]:
+def _mapped(odometry_scene, *settings: str) -> tuple[MapScore, float]:
     """The map's score and the median position error of the poses used."""
-    bag, plan, trajectory, seen = scene
+    bag, plan, trajectory, seen = odometry_scene
     poses = []
     wall_map = map_bag(bag, configured(*settings), poses=poses)
     errors = [
@@ -43,13 +33,13 @@ def _mapped(scene, *settings: str) -> tuple[MapScore, float]:
     return evaluate_map(walls(wall_map), plan, seen), float(np.median(errors))
 
 
-def test_wall_refined_scan_matching_beats_wheel_odometry(scene) -> None:
+def test_wall_refined_scan_matching_beats_wheel_odometry(odometry_scene) -> None:
     """Issue 8's bar: at least the odometry's precision and recall, at most half its offset."""
-    start = scene[2].pose_at(0)
-    odom, odom_error = _mapped(scene, "player.source.pose_source=odom")
+    start = odometry_scene[2].pose_at(0)
+    odom, odom_error = _mapped(odometry_scene, "player.source.pose_source=odom")
     tracked = ("up.odometry=true", f"odometry.initial_pose={list(start)}")
-    icp, icp_error = _mapped(scene, *tracked, "odometry.use_walls=false")
-    refined, refined_error = _mapped(scene, *tracked)
+    icp, icp_error = _mapped(odometry_scene, *tracked, "odometry.use_walls=false")
+    refined, refined_error = _mapped(odometry_scene, *tracked)
     print(f"\nodom: {odom.summary()}; pose error {odom_error:.3f} m")
     print(f"scan matching: {icp.summary()}; pose error {icp_error:.3f} m")
     print(f"scan matching + walls: {refined.summary()}; pose error {refined_error:.3f} m")
