@@ -68,8 +68,9 @@ class Option:
             parser.add_argument(self.flag, action=argparse.BooleanOptionalAction, **common)
         else:
             action = "append" if self.repeat else "store"
+            metavar = self.metavar or (None if self.choices else self.key.rsplit(".")[-1].upper())
             parser.add_argument(
-                self.flag, action=action, type=self.kind, metavar=self.metavar,
+                self.flag, action=action, type=self.kind, metavar=metavar,
                 choices=self.choices, **common,
             )  # fmt: skip
 
@@ -81,7 +82,9 @@ def _lookup(config: Any, key: str) -> Any:
 
 
 def _default_text(value: Any, option: Option) -> str:
-    if value is None or option.const is not None or (option.negatable and value is False):
+    if option.negatable:
+        return f" (default {'on' if value else 'off'})"
+    if value is None or option.const is not None:
         return ""
     if isinstance(value, tuple):
         value = ",".join(map(str, value))
