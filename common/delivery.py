@@ -362,7 +362,9 @@ class InOrder:
     def _release(self, run: _Run, now: float, ready: list[Observations]) -> int:
         """Move the run's frames that are next into ``ready``; give up a gap held too long."""
         if run.next is None:
-            if not run.held or now - run.since < self.start_wait:
+            # A run's first frame is number 0: with it there is nothing earlier to wait for.
+            # A run first seen mid-way waits ``start_wait`` for its history to come.
+            if 0 not in run.held and (not run.held or now - run.since < self.start_wait):
                 return 0
             run.next = min(run.held)
         lost = 0

@@ -96,12 +96,19 @@ def _seqs(items: list[Observations]) -> list[int]:
     return [o.seq for o in items]
 
 
-def test_frames_in_order_pass_at_once_after_the_start_wait() -> None:
+def test_a_runs_first_frame_passes_at_once_and_the_rest_in_order() -> None:
     order = InOrder(gap_wait=5.0, start_wait=1.0)
-    assert order.take(_obs(0), now=0.0).ready == []  # a new run waits for its history
-    assert order.take(_obs(1), now=0.5).ready == []
-    assert _seqs(order.take(None, now=1.0).ready) == [0, 1]
-    assert _seqs(order.take(_obs(2), now=1.1).ready) == [2]
+    assert _seqs(order.take(_obs(0), now=0.0).ready) == [0], "nothing comes before frame 0"
+    assert _seqs(order.take(_obs(1), now=0.1).ready) == [1]
+    assert order.take(_obs(3), now=0.2).ready == []  # 2 first
+    assert _seqs(order.take(_obs(2), now=0.3).ready) == [2, 3]
+
+
+def test_a_run_first_seen_mid_way_waits_for_its_history() -> None:
+    order = InOrder(gap_wait=5.0, start_wait=1.0)
+    assert order.take(_obs(7), now=0.0).ready == []  # a live frame: 0 to 6 may be on their way
+    assert order.take(_obs(8), now=0.5).ready == []
+    assert _seqs(order.take(None, now=1.0).ready) == [7, 8]
 
 
 def test_a_run_first_seen_mid_way_starts_at_the_earliest_frame_that_came() -> None:
