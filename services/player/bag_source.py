@@ -25,7 +25,12 @@ from wallmap.services.player.errors import decided
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.placement import LevelMode, Placement
 from wallmap.services.player.pose_choice import pose_topics
-from wallmap.services.player.pose_sources import PoseSourceSpec, load_tum, parse_pose_source
+from wallmap.services.player.pose_sources import (
+    BAG_DEFAULT,
+    PoseSourceSpec,
+    load_tum,
+    parse_pose_source,
+)
 
 __all__ = ["BagSource", "SensorFrame"]
 
@@ -41,7 +46,7 @@ class BagSource(BagFrames):
         path: Path,
         *,
         sensor_topic: str | None = None,
-        pose_source: str = "tf",
+        pose_source: str = BAG_DEFAULT,
         base_frame: str | None = None,
         topics: Iterable[str] | None = None,
         level: LevelMode = "auto",

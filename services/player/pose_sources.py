@@ -28,6 +28,7 @@ from wallmap.common.tf_buffer import normalize_frame
 from wallmap.services.player.errors import PlayerError, Refusal
 
 ACCEPTED_FORMS = "tf, tf:PARENT>CHILD, odom, odom:TOPIC, pose, pose:TOPIC, tum:FILE, none"
+BAG_DEFAULT = "tf"  # a bag's poses when none is asked for: map -> base_link (or the sensor)
 
 PoseSourceKind = Literal["tf", "odom", "pose", "tum", "none"]
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.placement import LevelMode
+from wallmap.services.player.pose_sources import BAG_DEFAULT
 from wallmap.services.player.tum_folder import (
     TUM_DEPTH_SCALE,
     TUM_INTRINSICS,
@@ -58,7 +59,7 @@ def open_source(path: Path, options: SourceOptions | None = None) -> FrameSource
     return BagSource(
         Path(path),
         sensor_topic=how.sensor_topic,
-        pose_source=how.pose_source or "tf",
+        pose_source=how.pose_source or BAG_DEFAULT,
         topics=topics,
         level=how.level,
         floor_z=how.floor_z,
