@@ -175,6 +175,27 @@ def update(x: Array, p: Array, innov: JointInnovation) -> tuple[Array, Array]:
     return x_new, 0.5 * (p_new + p_new.T)
 
 
+def update_wall_only(x: Array, p: Array, innov: JointInnovation) -> tuple[Array, Array]:
+    """The update of wall ``innov.slot`` alone, the rest of the state considered, not estimated.
+
+    A Schmidt (consider) update: the pose, the calibration and the other walls keep their
+    estimates, while every covariance, their correlations with this wall included, is the
+    exact one of the suboptimal gain (Joseph form). For walls too young to steer the pose: a
+    wall started from a few short pieces is less sure of its direction than its fits say, and
+    would turn the robot to agree with it.
+    """
+    cols = _columns(innov.slot)
+    wall = cols[POSE:]
+    pht = p[:, cols] @ innov.jacobian.T
+    gain = np.zeros_like(pht)
+    gain[wall] = pht[wall] @ ekf.inverse_and_det(innov.cov)[0]
+    x_new = x + gain @ innov.residual
+    hp = pht.T  # H P, 2 x n
+    # (I - K H) P (I - K H)^T + K R K^T, with H P H^T + R = S:
+    p_new = p - gain @ hp - hp.T @ gain.T + gain @ innov.cov @ gain.T
+    return x_new, 0.5 * (p_new + p_new.T)
+
+
 def augment(x: Array, p: Array, z: Array, r: Array) -> tuple[Array, Array, Array]:
     """Add a wall first seen as ``z`` (covariance ``r``) from the state's pose.
 

@@ -45,8 +45,16 @@ class SlamConfig:
         calibration_sd: How far off the odometry's scale (a share) and heading (rad per metre)
             may be at the start: 5 % and 3 degrees per metre.
         calibration_drift: How fast each may change, per square root of a metre driven.
-        min_obs: A frame matched to a wall seen this often is one where walls fixed the pose
-            (``fixes``); frames without are counted ``alone``.
+        ambiguity: A match whose wall is not this much more log-likely than the next wall in
+            the gate (log 20: twenty times) is ambiguous: it updates its wall, not the pose.
+        end_sd: How far (m, one standard deviation) a line's ends may be off, beyond its fit:
+            its direction is taken as that much less sure over its length. A short line's fit
+            is surer than its direction is (a corner's points, a depth camera's steps), and a
+            wall a few degrees off the path turns every error of its direction into one along
+            the path (tenfold at 6 degrees).
+        min_obs: Walls seen this often (and more) steer the pose; younger ones are updated
+            alone, keeping their correlations. A frame with such a match is one where walls
+            fixed the pose (``fixes``); frames without are counted ``alone``.
         window_frames: A wall not seen for this many frames leaves the joint state.
         window_walls: At most this many walls in the joint state (the least recently seen
             leave first): its cost grows with their square.
@@ -57,6 +65,8 @@ class SlamConfig:
     calibration_sd: tuple[float, float] = (0.05, math.radians(3.0))
     calibration_drift: tuple[float, float] = (0.005, math.radians(0.2))
     min_obs: int = 6
+    ambiguity: float = math.log(20.0)
+    end_sd: float = 0.01
     window_frames: int = 300
     window_walls: int = 48
 
@@ -82,13 +92,15 @@ class PoseCorrector:
         self.frame += 1
         depth = frame.sensor == "depth"
         fixed = 0
-        for obs in frame.walls:
-            wall = self._associate(obs, wall_map)
+        for seen in frame.walls:
+            obs = self._softened(seen)
+            wall, ambiguous = self._associate(obs, wall_map)
             if wall is None:
                 self._start(obs, wall_map, frame.stamp, depth=depth)
                 continue
-            fixed += int(wall.n_obs >= self.config.min_obs)
-            self._update(wall, obs, wall_map, frame.stamp, depth=depth)
+            steer = wall.n_obs >= self.config.min_obs and not ambiguous
+            fixed += int(steer)
+            self._update(wall, obs, wall_map, frame.stamp, depth=depth, steer=steer)
         self._write_back(wall_map)
         self._shrink_window()
         self.fixes += fixed
@@ -118,12 +130,25 @@ class PoseCorrector:
             )
         self.odom = seen
 
-    def _associate(self, obs: WallObservation, wall_map: WallMap) -> Wall | None:
-        """The most likely wall within the gate, its innovation with the pose's uncertainty."""
+    def _softened(self, obs: WallObservation) -> WallObservation:
+        """``obs`` with its direction as unsure as its ends' ``end_sd`` over its length makes it."""
+        length = max(float(np.linalg.norm(obs.p1 - obs.p0)), 0.05)
+        lines = ekf.line_jacobian(obs.closest)
+        extra = lines @ np.diag([0.0, (self.config.end_sd / length) ** 2]) @ lines.T
+        return replace(obs, cov=obs.cov + extra)
+
+    def _associate(self, obs: WallObservation, wall_map: WallMap) -> tuple[Wall | None, bool]:
+        """The most likely wall within the gate, and whether another was nearly as likely.
+
+        Likelihoods are on the innovation covariance, the pose's uncertainty in it. An ambiguous
+        match still updates its wall, as the map would, but does not steer the pose: where the
+        pose is unsure along a corridor, a door's jamb or a side room's wall can pass for the
+        next one, and the pose would jump to agree.
+        """
         assert self.x is not None
         pose, pose_cov = self.x[:3], self.p[:3, :3]
         slots = {wall_id: slot for slot, wall_id in enumerate(self.ids)}
-        best: tuple[float, Wall] | None = None
+        scores: list[tuple[float, int, Wall]] = []
         for wall in wall_map.near_observation(obs, pose):
             slot = slots.get(wall.id)
             if slot is None:
@@ -134,9 +159,13 @@ class PoseCorrector:
             else:
                 joint = slam_ekf.innovation(self.x, self.p, slot, wall.anchor, obs.closest, obs.cov)
                 m2, likelihood = joint.mahalanobis2, joint.log_likelihood
-            if m2 <= wall_map.config.gate and (best is None or likelihood > best[0]):
-                best = (likelihood, wall)
-        return None if best is None else best[1]
+            if m2 <= wall_map.config.gate:
+                scores.append((likelihood, -wall.id, wall))
+        if not scores:
+            return None, False
+        scores.sort(reverse=True)
+        ambiguous = len(scores) > 1 and scores[0][0] - scores[1][0] < self.config.ambiguity
+        return scores[0][2], ambiguous
 
     def _start(self, obs: WallObservation, wall_map: WallMap, stamp: float, *, depth: bool) -> None:
         assert self.x is not None
@@ -152,8 +181,29 @@ class PoseCorrector:
         self.seen.append(self.frame)
 
     def _update(
-        self, wall: Wall, obs: WallObservation, wall_map: WallMap, stamp: float, *, depth: bool
+        self,
+        wall: Wall,
+        obs: WallObservation,
+        wall_map: WallMap,
+        stamp: float,
+        *,
+        depth: bool,
+        steer: bool,
     ) -> None:
+        self._joint_update(wall, obs, steer=steer)
+        merges = len(wall_map.merges)
+        wall_map.observed(wall, obs, self.x[:3].copy(), stamp, depth=depth)
+        # A merge fused two walls outside the joint state: both leave the window (the one that
+        # stays comes back, uncorrelated, when seen again).
+        for gone, keep, _ in wall_map.merges[merges:]:
+            self._drop([s for s, i in enumerate(self.ids) if i in (gone, keep)])
+
+    def _joint_update(self, wall: Wall, obs: WallObservation, *, steer: bool) -> None:
+        """Update the window with ``obs`` of ``wall``, bringing the wall in if it is out.
+
+        ``steer``: the wall is settled enough (``min_obs``) to correct the pose; a younger one
+        is updated alone, keeping its correlations (``slam_ekf.update_wall_only``).
+        """
         assert self.x is not None
         if wall.id not in self.ids:
             self.x, self.p = slam_ekf.insert(self.x, self.p, wall.s, wall.p)
@@ -161,16 +211,11 @@ class PoseCorrector:
             self.seen.append(self.frame)
         slot = self.ids.index(wall.id)
         innov = slam_ekf.innovation(self.x, self.p, slot, wall.anchor, obs.closest, obs.cov)
-        self.x, self.p = slam_ekf.update(self.x, self.p, innov)
+        update = slam_ekf.update if steer else slam_ekf.update_wall_only
+        self.x, self.p = update(self.x, self.p, innov)
         self.seen[slot] = self.frame
         window = slam_ekf.wall_slice(slot)
         wall.set_state(self.x[window].copy(), self.p[window, window].copy())
-        merges = len(wall_map.merges)
-        wall_map.observed(wall, obs, self.x[:3].copy(), stamp, depth=depth)
-        # A merge fused two walls outside the joint state: both leave the window (the one that
-        # stays comes back, uncorrelated, when seen again).
-        for gone, keep, _ in wall_map.merges[merges:]:
-            self._drop([s for s, i in enumerate(self.ids) if i in (gone, keep)])
 
     def _write_back(self, wall_map: WallMap) -> None:
         """The window's walls as the joint state has them now, into the map."""

@@ -137,3 +137,27 @@ def test_a_correction_of_the_pose_moves_the_walls_started_from_it() -> None:
     assert abs(np.linalg.norm(x[5:7]) - 2.5) < 5e-3
     assert np.allclose(anchor, truth[:2])
     assert np.all(np.linalg.eigvalsh(p) > -1e-12)
+
+
+def test_a_young_wall_updates_alone_and_keeps_its_correlations_exact() -> None:
+    """update_wall_only: the wall moves, nothing else does; P is the Joseph form of its gain."""
+    rng = np.random.default_rng(11)
+    x, p = _state(rng, walls=2)
+    anchor = np.array([0.3, 0.1])
+    innov = slam_ekf.innovation(x, p, 1, anchor, np.array([1.5, -2.0]), np.eye(2) * 1e-3)
+    x_new, p_new = slam_ekf.update_wall_only(x, p, innov)
+    moved = np.flatnonzero(np.abs(x_new - x) > 0)
+    assert set(moved) <= {7, 8}, "only wall 1's entries change"
+    assert len(moved) > 0
+    cols = [0, 1, 2, 7, 8]
+    pht = p[:, cols] @ innov.jacobian.T
+    gain = np.zeros_like(pht)
+    gain[[7, 8]] = pht[[7, 8]] @ np.linalg.inv(innov.cov)
+    h = np.zeros((2, len(x)))
+    h[:, cols] = innov.jacobian
+    r = innov.cov - h @ p @ h.T
+    i_kh = np.eye(len(x)) - gain @ h
+    assert np.allclose(p_new, i_kh @ p @ i_kh.T + gain @ r @ gain.T, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(p_new) > -1e-12)
+    assert np.trace(p_new[7:9, 7:9]) < np.trace(p[7:9, 7:9]), "the wall is surer"
+    assert np.allclose(p_new[:5, :5], p[:5, :5]), "the pose is neither moved nor surer"
