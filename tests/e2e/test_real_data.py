@@ -37,8 +37,12 @@ def real_bag(name: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize("name", sorted(CORRIDOR))
-def test_scan_only_bag_maps_with_scan_matching(stack, name: str) -> None:
+PACES = [(name, "--fast") for name in sorted(CORRIDOR)] + [("eng403_good.bag", "--rate=4")]
+
+
+@pytest.mark.parametrize(("name", "pace"), PACES)
+def test_scan_only_bag_maps_with_scan_matching(stack, name: str, pace: str) -> None:
+    """``pace``: as fast as the services go, or timed as recorded (4x), as a live robot is."""
     bag = real_bag(name)
     settings = ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)
     with open_session(settings) as session:
@@ -50,7 +54,7 @@ def test_scan_only_bag_maps_with_scan_matching(stack, name: str) -> None:
         played = stack.run(
             "player",
             str(bag),
-            "--fast",
+            pace,
             "--pose-source",
             "none",
             "--wait-for",

@@ -36,10 +36,11 @@ def camera_flags(camera: DepthCamera) -> list[str]:
     return ["--intrinsics", f"{fx},{fy},{cx},{cy}", "--depth-scale", f"{camera.depth_scale:g}"]
 
 
-def up(path: Path, out: Path, *flags: str) -> dict:
-    """`wallmap up` on a private port, as a user runs it; its final map."""
+def up(path: Path, out: Path, *flags: str, fast: bool = True) -> dict:
+    """`wallmap up` on a private port, as a user runs it (``fast``: ``--fast``); its final map."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    run_wallmap("up", str(path), "--fast", "--exit-when-done", "--json-out", str(out),
+    pace = ["--fast"] if fast else []
+    run_wallmap("up", str(path), *pace, "--exit-when-done", "--json-out", str(out),
                 "--connect", endpoint, *flags, timeout=240)  # fmt: skip
     return json.loads(out.read_text())
 
@@ -76,10 +77,27 @@ def test_the_real_kitchen_maps_the_same_whichever_way_it_comes(kitchen_ways, way
     assert on_walls >= 0.3
 
 
-def test_the_kitchen_bag_with_6dof_tf_needs_no_pose_source_and_the_doctor_says_so() -> None:
+def kitchen_bag() -> Path:
+    """The kitchen as a handheld camera's user records it: 6-DoF tf, LZ4 chunks."""
     bag = RGBD["redkitchen"][0].parent / "redkitchen_150_199.bag"
     if not bag.exists():
         pytest.skip(f"real recording {bag} is absent")
+    return bag
+
+
+def test_the_kitchen_bag_played_in_real_time_maps_every_frame(tmp_path) -> None:
+    """The default pace, as a live camera delivers its frames: nothing lost, a clean exit."""
+    reply = up(kitchen_bag(), tmp_path / "map.json", fast=False)
+    assert reply["frames"] == 50, "every frame integrated"
+    walls = [MappedWall.from_reply(w) for w in reply["walls"]]
+    assert 1 <= len(walls) <= 12
+    assert fans(walls) == []
+    assert duplicates(walls) == []
+    assert max(w.length for w in walls) >= 1.5, "the wall behind the counter"
+
+
+def test_the_kitchen_bag_with_6dof_tf_needs_no_pose_source_and_the_doctor_says_so() -> None:
+    bag = kitchen_bag()
     doctor = run_wallmap("doctor", str(bag))
     assert "tf:map>camera_link" in doctor.stdout
     assert "tilted" in doctor.stdout
