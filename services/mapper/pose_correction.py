@@ -47,11 +47,15 @@ class SlamConfig:
         calibration_drift: How fast each may change, per square root of a metre driven.
         ambiguity: A match whose wall is not this much more log-likely than the next wall in
             the gate (log 20: twenty times) is ambiguous: it updates its wall, not the pose.
-        end_sd: How far (m, one standard deviation) a line's ends may be off, beyond its fit:
-            its direction is taken as that much less sure over its length. A short line's fit
-            is surer than its direction is (a corner's points, a depth camera's steps), and a
-            wall a few degrees off the path turns every error of its direction into one along
-            the path (tenfold at 6 degrees).
+        end_sd: Beyond its fit, a line's direction is taken as this much (m) over its length
+            less sure (one standard deviation), turned about its foot, the point (u, v) is:
+            the seen piece's offset is then as much less sure times its distance from the
+            foot over its length. A short line's fit is surer than its direction is (a
+            corner's points, a depth camera's steps), a wall a few degrees off the path turns
+            every error of its direction into one along the path (tenfold at 6 degrees), and
+            a piece far ahead along a side wall says less about where that wall lies than one
+            at its foot. Turned about the piece's middle instead (its direction alone less
+            sure), corridors lose up to 0.13 of precision (docs/slam.md).
         min_obs: Walls seen this often (and more) steer the pose; younger ones are updated
             alone, keeping their correlations. A frame with such a match is one where walls
             fixed the pose (``fixes``); frames without are counted ``alone``.
@@ -131,7 +135,7 @@ class PoseCorrector:
         self.odom = seen
 
     def _softened(self, obs: WallObservation) -> WallObservation:
-        """``obs`` with its direction as unsure as its ends' ``end_sd`` over its length makes it."""
+        """``obs`` turned about its foot by ``end_sd`` over its length, one standard deviation."""
         length = max(float(np.linalg.norm(obs.p1 - obs.p0)), 0.05)
         lines = ekf.line_jacobian(obs.closest)
         extra = lines @ np.diag([0.0, (self.config.end_sd / length) ** 2]) @ lines.T

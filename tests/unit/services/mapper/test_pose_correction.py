@@ -11,9 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wallmap.common import ekf
+from wallmap.common.messages import WallObservation
 from wallmap.config import configured
 from wallmap.evaluation import evaluate_map
 from wallmap.offline import map_bag, walls
+from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 
 N_FRAMES = 600
 
@@ -77,3 +80,26 @@ def test_without_slam_the_poses_are_used_as_they_come(scenes) -> None:
     map_bag(scene.path, configured("player.source.pose_source=odom"), poses=used)
     assert all(p.cov is None or p.cov.shape == (3, 3) for p in used)
     assert _trajectory_error(used, scene.trajectory) > 0.3, "raw odometry: the drift stays"
+
+
+@pytest.mark.parametrize(("start", "end"), [(-1.5, 1.5), (2.0, 5.0), (-6.0, -5.7)])
+def test_a_line_is_turned_about_its_foot_by_end_sd_over_its_length(start, end) -> None:
+    """The softening is what SlamConfig.end_sd says: in (offset, angle), the angle alone, by
+    end_sd / length; at the piece's middle, t from the foot, its offset by t times that."""
+    end_sd = 0.02
+    obs = WallObservation(
+        closest=np.array([0.0, 1.0]),  # a side wall along x, 1 m to the left
+        cov=np.diag([1e-4, 4e-4]),
+        p0=np.array([start, 1.0]),
+        p1=np.array([end, 1.0]),
+        n_points=50,
+        rms=0.01,
+    )
+    softened = PoseCorrector(SlamConfig(end_sd=end_sd))._softened(obs)
+    to_line = np.linalg.inv(ekf.line_jacobian(obs.closest))
+    extra = to_line @ (softened.cov - obs.cov) @ to_line.T  # over (offset, angle)
+    turn = end_sd / (end - start)
+    np.testing.assert_allclose(extra, np.diag([0.0, turn**2]), atol=1e-12)
+    middle = 0.5 * (start + end)  # along the wall from its foot (0, 1)
+    across_middle = np.array([1.0, -middle])  # offset there: rho - t theta (direction -x)
+    assert across_middle @ extra @ across_middle == pytest.approx((middle * turn) ** 2)
