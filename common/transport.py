@@ -34,6 +34,10 @@ class TransportError(RuntimeError):
     """The session could not be opened; the message says why, in one line."""
 
 
+class StoppedWaiting(Exception):  # noqa: N818 - a stop asked for, not an error
+    """A stop (SIGINT, SIGTERM) came while the session was still waiting for its router."""
+
+
 @dataclass(frozen=True)
 class ZenohSettings:
     """Where and how to connect: the ``zenoh`` section of the configuration.
@@ -128,17 +132,19 @@ def open_session(
     mode: str = "client",
     listen: tuple[str, ...] = (),
     count: Callable[[str], None] | None = None,
+    stop: threading.Event | None = None,
 ) -> Iterator[zenoh.Session]:
     """A session for the ``with`` block, Zenoh's errors turned into one readable line.
 
     A client's link to its router is watched (see ``RouterWatch``); ``count`` is told of each
-    loss and recovery (``router_lost``, ``router_back``), for the service's counters.
+    loss and recovery (``router_lost``, ``router_back``), for the service's counters. ``stop``
+    (set by SIGINT or SIGTERM) ends a wait for the router with ``StoppedWaiting``.
     """
     conf = make_config(settings, mode=mode, listen=listen)
+    where = ", ".join(listen if mode == "router" else settings.connect)
     try:
-        session = zenoh.open(conf)
+        session = zenoh.open(conf) if stop is None else _open_unless_stopped(conf, stop, where)
     except zenoh.ZError as err:
-        where = ", ".join(listen if mode == "router" else settings.connect)
         verb = "listen on" if mode == "router" else "reach a Zenoh router at"
         msg = f"cannot {verb} {where} ({zenoh_reason(err)})"
         raise TransportError(msg) from err
@@ -149,6 +155,34 @@ def open_session(
         if watch is not None:
             watch.close()
         _close(session)
+
+
+def _open_unless_stopped(conf: zenoh.Config, stop: threading.Event, where: str) -> zenoh.Session:
+    """``zenoh.open`` on a thread of its own, so that a stop is heard while it waits.
+
+    A client waiting for its router blocks in ``zenoh.open`` (``connect/timeout_ms``), and a
+    signal's Python handler runs only once the main thread is back in Python: Ctrl-C and
+    SIGTERM would go unheard until a router came. The thread left waiting is a daemon.
+    """
+    opened: list[zenoh.Session] = []
+    failed: list[zenoh.ZError] = []
+
+    def opening() -> None:
+        try:
+            opened.append(zenoh.open(conf))
+        except zenoh.ZError as err:
+            failed.append(err)
+
+    thread = threading.Thread(target=opening, name="zenoh-open", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        if stop.is_set():
+            msg = f"stopped while waiting for a Zenoh router at {where}"
+            raise StoppedWaiting(msg)
+        thread.join(0.1)
+    if failed:
+        raise failed[0]
+    return opened[0]
 
 
 def _close(session: zenoh.Session) -> None:

@@ -26,6 +26,7 @@ from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
     DEFAULT_CONNECT,
     Keys,
+    StoppedWaiting,
     TransportError,
     key_expression,
     open_session,
@@ -306,6 +307,9 @@ def main(argv: list[str] | None = None) -> int:
     except FAILURES as err:
         print(f"wallmap {args.command}: error: {err}", file=sys.stderr)
         return 1
+    except StoppedWaiting as stopped:  # asked to stop before there was anything to stop
+        print(f"wallmap {args.command}: {stopped}", file=sys.stderr)
+        return 0
     except zenoh.ZError as err:  # one Zenoh did not foresee here either: still one line
         print(f"wallmap {args.command}: error: zenoh: {zenoh_reason(err)}", file=sys.stderr)
         return 1

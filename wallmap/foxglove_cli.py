@@ -95,7 +95,7 @@ def _cmd_record(args: argparse.Namespace, config: Config) -> int:
     stop = stop_on_signals()
     settings = replace(config.zenoh, wait_for_router=WAIT_FOR_ROUTER)
     context = foxglove.Context()
-    with open_session(settings) as session:  # first, so no router leaves no empty file behind
+    with open_session(settings, stop=stop) as session:  # first: no router, no empty file
         relay = _Relay(bridge, context, log)
         with foxglove.open_mcap(args.out, context=context) as writer:
             writer.write_metadata("wallmap", {"version": __version__, "prefix": settings.prefix})
@@ -130,7 +130,7 @@ def _cmd_foxglove(args: argparse.Namespace, config: Config) -> int:
         msg = f"cannot serve Foxglove on {args.host}:{args.port} ({err})"
         raise OSError(msg) from err
     try:
-        with open_session(settings) as session:
+        with open_session(settings, stop=stop) as session:
             print(f"Foxglove: open a connection to ws://{args.host}:{server.port}", flush=True)
             relay.run(session, Keys(settings.prefix), "foxglove", stop)
     finally:

@@ -49,7 +49,7 @@ def run(
     stats = Stats(log)
     detector = WallDetector(config)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings, count=stats.add) as session:
+    with open_session(settings, count=stats.add, stop=stop) as session:
         publisher = declare_history_publisher(session, keys.observations, history.samples())
         diagnostics = session.declare_publisher(keys.detector_diagnostics)
         frames = subscribe_with_history(

@@ -158,7 +158,7 @@ def run(
     pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings, count=stats.add) as session:
+    with open_session(settings, count=stats.add, stop=stop) as session:
         progress = session.declare_publisher(keys.progress)
         updates = session.declare_publisher(keys.map_updates)
         corrected = _CorrectedPoses(session, keys, log) if core.corrector is not None else None

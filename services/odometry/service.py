@@ -50,7 +50,7 @@ def run(
     tracker = PoseTracker(config)
     rows = rows or RowSelection()
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
-    with open_session(settings, count=stats.add) as session:
+    with open_session(settings, count=stats.add, stop=stop) as session:
         # Poses with history, for a mapper that restarts; frames without: scan matching goes
         # in order, and a restarted odometry starts afresh.
         publisher = declare_history_publisher(session, keys.pose, (history or History()).samples())

@@ -319,7 +319,7 @@ def run(
         )
         if placed := bag.placement.describe():
             log.info("%s", placed)
-        with open_session(settings) as session:
+        with open_session(settings, stop=stop) as session:
             acks = AckWindow(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
             _wait_for_services(session, keys, player.services, player.wait_timeout, stop)

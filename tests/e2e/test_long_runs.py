@@ -17,7 +17,7 @@ import sys
 import time
 
 import pytest
-from conftest import assert_clean_exit, free_port
+from conftest import Stack, assert_clean_exit, free_port
 
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import Camera, write_scene_bag
@@ -124,6 +124,29 @@ def test_a_looping_player_stopped_by_a_signal_exits_0(stack, long_bags, how) -> 
     assert player.proc.poll() is None, player.output()
     assert player.stop(sig=how) == 0
     assert _published(player.output()) > scene.n_frames, "it went round more than once"
+
+
+@pytest.mark.parametrize(
+    ("service", "how"),
+    [("mapper", signal.SIGTERM), ("mapper", signal.SIGINT), ("detector", signal.SIGTERM),
+     ("odometry", signal.SIGTERM), ("player", signal.SIGINT)],
+)  # fmt: skip
+def test_a_service_waiting_for_its_router_stops_on_a_signal(
+    long_bags, tmp_path, service: str, how: int
+) -> None:
+    """Started before any router (docker-compose, a robot's boot), a service waits for one; a
+    stop must still be heard then, not only once a router came (the wait is in Zenoh's code)."""
+    nowhere = Stack(tmp_path, f"tcp/127.0.0.1:{free_port()}", "norouter")
+    bag = [str(long_bags["ros1-pointcloud"].path)] if service == "player" else []
+    waiting = nowhere.start(service, service, *bag, *nowhere.zenoh_args,
+                            env={"WALLMAP_LOG": "INFO"})  # fmt: skip
+    time.sleep(4.0)  # started, and waiting in zenoh.open
+    assert waiting.proc.poll() is None, waiting.output()
+    start = time.monotonic()
+    assert waiting.stop(timeout=10.0, sig=how) == 0, waiting.output()
+    assert time.monotonic() - start < 5.0, "the stop is heard at once"
+    waiting.assert_clean()
+    assert "stopped while waiting for a Zenoh router" in waiting.output()
 
 
 def test_up_stopped_by_ctrl_c_stops_its_services_cleanly(long_bags, tmp_path) -> None:
