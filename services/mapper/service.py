@@ -47,6 +47,7 @@ from wallmap.services.pipeline import Mapping
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
 HOLD_POLL = 0.02  # s between looks at a held gap
 UPDATE_PERIOD = 0.5  # s between map updates while busy
+UPDATE_FRAMES = 5  # frames integrated that make an update due sooner (a bag played --fast)
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 BACKLOG = "backlog"  # dropped because MAX_PENDING newer frames wait for poses too
 
@@ -100,6 +101,11 @@ class MapperCore:
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
+        # Set once UPDATE_FRAMES frames were integrated since the last map update: a bag played
+        # --fast goes through hundreds of frames a second, and the odometry holds its poses onto
+        # the walls of those updates (every UPDATE_PERIOD alone, it would see 150 frames old ones).
+        self.update_due = threading.Event()
+        self.since_update = 0
         # Each run's progress, with this process's epoch in every acknowledgement.
         self.progress = RunProgress(runs, epoch=uuid.uuid4().hex[:12])
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
@@ -329,14 +335,30 @@ def _observations(
 def _updates(
     core: MapperCore, updates: zenoh.Publisher, stop: threading.Event, ros2: Ros2Outlet | None
 ) -> None:
-    """Publish the walls that changed (and the ROS 2 markers), at most every UPDATE_PERIOD s."""
-    while not stop.wait(UPDATE_PERIOD):
+    """Publish the walls that changed, and the ROS 2 markers.
+
+    An update goes every UPDATE_PERIOD s, or sooner once UPDATE_FRAMES frames were integrated,
+    when walls changed or frames were integrated (its frames and stamp say how current the map
+    is). The markers (the whole served map, rebuilt: tens of ms for a thousand walls) go at
+    most every UPDATE_PERIOD s, and once more after the last change.
+    """
+    markers_stale, markers_due, frames = False, 0.0, -1
+    while not stop.is_set():
+        core.update_due.wait(UPDATE_PERIOD)
+        core.update_due.clear()
+        served = None
         with core.lock:
-            if not core.map.changed and not core.map.removed:
-                continue
-            changes = serving.take_changes(core.map)
-            served = serving.reply(core.map, MapQuery(trajectory=True)) if ros2 else None
-        updates.put(encode(changes.to_map()))
+            core.since_update = 0
+            changed = bool(core.map.changed or core.map.removed)
+            grown = changed or core.map.frames != frames
+            changes = serving.take_changes(core.map) if grown else None
+            frames = core.map.frames
+            markers_stale |= changed
+            if ros2 is not None and markers_stale and time.monotonic() >= markers_due:
+                served = serving.reply(core.map, MapQuery(trajectory=True))
+                markers_stale, markers_due = False, time.monotonic() + UPDATE_PERIOD
+        if changes is not None:
+            updates.put(encode(changes.to_map()))
         if ros2 is not None and served is not None:
             ros2.publish(served)
 
@@ -420,6 +442,9 @@ class _Waiting:
                 if core.corrector is not None and self.corrected is not None:
                     self.corrected.publish(core.corrector, pose, odom_frame)
                 core.dirty = True
+                core.since_update += 1
+                if core.since_update >= UPDATE_FRAMES:
+                    core.update_due.set()
             self._done(obs, integrated=integrated)
         if integrated:
             core.stats.add("integrated")

@@ -81,5 +81,5 @@ def test_scan_only_bag_maps_with_scan_matching(stack, name: str, pace: str) -> N
     assert duplicates(walls, max_angle_deg=3.0, max_offset=0.10) == []
     if CORRIDOR[name]:
         first, second = sorted(walls, key=lambda w: -w.length)[:2]
-        assert min(first.length, second.length) >= 5.0, "the corridor's walls come out long"
+        assert min(first.length, second.length) >= 11.0, "the corridor's walls come out whole"
         assert angle_between(first, second) <= 2.0, "and parallel"
