@@ -73,6 +73,9 @@ class ZenohSettings:
 def zenoh_reason(err: Exception) -> str:
     """Zenoh's error text as one line: the position and reason of a parse error, no source path."""
     text = re.sub(r" at /\S+\.rs:\d+\.?", "", str(err)).strip()
+    message = re.search(r'Json5Err\(Message \{ msg: "((?:[^"\\]|\\.)*)"', text)
+    if message:  # a value Zenoh refused, in Rust's debug form
+        return message[1]
     position = re.search(r"-->\s*(\d+):(\d+)", text)
     reason = re.search(r"^\s*= (.+)$", text, re.MULTILINE)
     if position and reason:
@@ -115,9 +118,9 @@ def make_config(
         conf.insert_json5("connect/retry", RECONNECT)
     conf.insert_json5("mode", json.dumps(mode))
     if mode == "router":
-        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        _insert_endpoints(conf, "listen", listen)
     else:
-        conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+        _insert_endpoints(conf, "connect", settings.connect)
         if settings.wait_for_router:
             wait = settings.wait_for_router
             timeout_ms = -1 if math.isinf(wait) else round(wait * 1000)
@@ -155,6 +158,15 @@ def open_session(
         if watch is not None:
             watch.close()
         _close(session)
+
+
+def _insert_endpoints(conf: zenoh.Config, what: str, endpoints: tuple[str, ...]) -> None:
+    """``listen`` or ``connect`` endpoints; one that Zenoh refuses is one line naming it."""
+    try:
+        conf.insert_json5(f"{what}/endpoints", json.dumps(list(endpoints)))
+    except zenoh.ZError as err:
+        msg = f"invalid --{what} {', '.join(endpoints)!r}: {zenoh_reason(err)}"
+        raise TransportError(msg) from err
 
 
 def _open_unless_stopped(conf: zenoh.Config, stop: threading.Event, where: str) -> zenoh.Session:

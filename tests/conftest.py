@@ -41,7 +41,7 @@ def wait_for_port(port: int, timeout: float = 20.0) -> None:
     raise TimeoutError(f"nothing listens on port {port}")
 
 
-CRASH_MARKS = ("Traceback (most recent call last)", "panicked at")
+CRASH_MARKS = ("Traceback (most recent call last)", "panicked at", "FATAL: exception not rethrown")
 ZENOH_ERROR = re.compile(r"ERROR.*zenoh")  # Zenoh's own log: e.g. a channel closed under it
 # ... except the shared-memory watchdog's "timer overrun": a machine too busy to wake it on time.
 ZENOH_LOAD = "timer overrun"

@@ -7,7 +7,9 @@ Every failure a person can cause (a missing bag, a bad flag, no router) ends wit
 from __future__ import annotations
 
 import argparse
+import logging
 import math
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import replace
@@ -308,8 +310,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wallmap {args.command}: error: {err}", file=sys.stderr)
         return 1
     except StoppedWaiting as stopped:  # asked to stop before there was anything to stop
-        print(f"wallmap {args.command}: {stopped}", file=sys.stderr)
-        return 0
+        logging.getLogger(f"wallmap.{args.command}").info("%s", stopped)  # flushed at once
+        # Out at once: the thread still in zenoh.open must not meet the interpreter's shutdown
+        # (a router answering then makes Zenoh's thread abort the process).
+        os._exit(0)
     except zenoh.ZError as err:  # one Zenoh did not foresee here either: still one line
         print(f"wallmap {args.command}: error: zenoh: {zenoh_reason(err)}", file=sys.stderr)
         return 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -23,7 +24,7 @@ from pathlib import Path
 
 from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
 from wallmap.config import Config, UpSettings, to_plain, to_toml
 from wallmap.evaluation import evaluate_map
 from wallmap.map_client import format_table, to_json
@@ -73,10 +74,16 @@ class _Services:
                 raise LaunchError(msg)
 
     def stop(self) -> None:
-        """Stop them all; raises LaunchError naming those that did not exit with status 0."""
+        """Stop them all; raises LaunchError naming those that did not exit with status 0.
+
+        One stopped while it was still starting, before it listened for SIGTERM, ends by the
+        signal itself: that is a clean stop too. The player's own status is ``up``'s, and the
+        player has said why it failed.
+        """
         failed = []
         for name, proc in reversed(self._procs):
-            if proc.poll() is None:
+            stopped = proc.poll() is None
+            if stopped:
                 proc.send_signal(signal.SIGTERM)
                 try:
                     proc.wait(timeout=STOP_TIMEOUT)
@@ -85,7 +92,7 @@ class _Services:
                     proc.wait()
                     failed.append(f"the {name} did not stop within {STOP_TIMEOUT:.0f} s")
                     continue
-            if proc.returncode != 0:
+            if name != "player" and proc.returncode not in (0, -signal.SIGTERM if stopped else 0):
                 failed.append(f"the {name} exited with status {proc.returncode}")
         if failed:
             raise LaunchError("; ".join(failed))
@@ -118,6 +125,7 @@ def for_services(config: Config) -> Config:
 def up(config: Config, bag: Path) -> int:
     """Run router, mapper, detector and player; print the map when the bag is done."""
     config = for_services(config)
+    _check_endpoint(config.zenoh)
     env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
     env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
     stop = stop_on_signals()
@@ -144,6 +152,25 @@ def up(config: Config, bag: Path) -> int:
                 print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
                 stop.wait()
     return 0
+
+
+def _check_endpoint(settings: ZenohSettings) -> None:
+    """The endpoint ``up`` starts its router on: valid, and free (not another router's)."""
+    make_config(settings)  # a malformed endpoint is one line, before anything starts
+    endpoint = settings.connect[0]
+    found = re.fullmatch(r"tcp/(.+):(\d+)", endpoint)
+    if found is None:
+        return
+    with socket.socket() as probe:
+        try:
+            probe.bind((found[1].strip("[]"), int(found[2])))
+        except OSError as err:
+            msg = (
+                f"cannot start a router on {endpoint} ({err.strerror}): `wallmap up` runs its "
+                "own; give it a free --connect endpoint, or start the services yourself on the "
+                "router there (README, Running the services)"
+            )
+            raise LaunchError(msg) from err
 
 
 def _report(config: Config) -> None:

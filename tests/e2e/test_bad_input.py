@@ -109,11 +109,29 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["player", "x.bag", "--start", "-1"], ["--start", ">= 0"]),
         (["odometry", "--initial-pose", "1,nan,0"], ["--initial-pose", "finite"]),
         (["scene", "/tmp/wallmap-scene-without-suffix"], ["ends in .bag"]),
+        (["query", "--connect", "garbage"], ["invalid --connect 'garbage'", "<protocol>"]),
+        (["router", "--listen", "tcp:7447"], ["invalid --listen 'tcp:7447'"]),
+        (["up", "x.bag", "--connect", "garbage"], ["invalid --connect 'garbage'"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):
     out = run_wallmap(*args, expect=None)  # 2 from argparse, 1 from a later check
     assert_one_line_error(out, args[0], *words)
+
+
+def test_up_with_a_bad_bag_is_the_players_one_line(tmp_path):
+    """The services ``up`` started, stopped while they still wait for the router (the player
+    failed at once), stop cleanly and say nothing more; the player's line is the one."""
+    bag = tmp_path / "notabag.bag"
+    bag.write_text("not a bag\n")
+    out = run_wallmap("up", str(bag), "--connect", f"tcp/127.0.0.1:{free_port()}", expect=1)
+    assert_one_line_error(out, "player", "not a ROS bag")
+
+
+def test_up_on_an_endpoint_taken_is_one_line(stack):
+    """``up`` runs its own router: another one already there is said before anything starts."""
+    out = run_wallmap("up", "x.bag", "--connect", stack.endpoint, expect=1)
+    assert_one_line_error(out, "up", "cannot start a router", stack.endpoint)
 
 
 def test_no_router_is_one_line():
