@@ -9,6 +9,7 @@ on ``{prefix}/map/updates`` (and one query at start) and hold the poses onto the
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 
@@ -25,6 +26,7 @@ from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
+LOG = logging.getLogger("wallmap.odometry")
 QUEUE_DEPTH = 8
 
 
@@ -116,7 +118,14 @@ def _work(
     stats: Stats,
 ) -> None:
     """A pose for every frame, in arrival order, until the subscriber is undeclared."""
+    run = None
     for frame in received_frames(frames, stats):
+        if frame.run != run:
+            if run is not None:
+                tracker.restart()
+                stats.add("restarts")
+                LOG.info("a new run (%s): scan matching starts afresh", frame.run)
+            run = frame.run
         if frame.sensor == "depth":
             stats.note(
                 "depth_frames",

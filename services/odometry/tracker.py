@@ -80,6 +80,15 @@ class PoseTracker:
         self.map_from_odom = se2.matrix(self.config.initial_pose)
         self._walls: dict[int, list[WallLine]] = {}
 
+    def restart(self) -> None:
+        """Start scan matching afresh at the initial pose (a new run), keeping the walls.
+
+        A bag played again starts where it started before, and its first scan is older than
+        the last one matched: without this, no scan of the new run would be matched.
+        """
+        self.matcher = ScanMatcher(self.config.matcher)
+        self.map_from_odom = se2.matrix(self.config.initial_pose)
+
     @property
     def wall_count(self) -> int:
         """Walls currently used as landmarks."""
