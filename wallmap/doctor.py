@@ -233,7 +233,9 @@ def _poses(report: Report) -> list[str]:
     for pose in report.poses[:MOST_POSES]:
         label = f"{pose.source}{' (default)' if pose.default else ''}"
         if not pose.available:
-            missing.append(f"{label}: missing ({pose.reason})")
+            played = pose.default and pose.player == "ok" and pose.warnings
+            instead = f"; the player plays all the same: {pose.warnings[0]}" if played else ""
+            missing.append(f"{label}: missing ({pose.reason}){instead}")
         else:
             row = (label, _span(pose.start, pose.end), str(pose.samples), _gaps(pose.gaps))
             if frames:

@@ -56,7 +56,12 @@ from wallmap.services.player.choices import (
 )
 from wallmap.services.player.errors import PlayerError, Refusal, decided
 from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE
-from wallmap.services.player.pose_sources import PoseSourceSpec, PoseTrack, parse_pose_source
+from wallmap.services.player.pose_sources import (
+    BAG_DEFAULT,
+    PoseSourceSpec,
+    PoseTrack,
+    parse_pose_source,
+)
 from wallmap.services.player.sources import SourceOptions
 from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
 
@@ -347,7 +352,10 @@ def _judge_poses(report: Report, bag: BagFile, contents: BagContents, sensor: Se
     for pose in report.poses:
         if not (pose.available or pose.default):  # the default's refusal is what `up` says
             continue
-        plan = plan_playback(contents, sensor, parse_pose_source(pose.source))
+        # The default is judged as the player takes it: map -> base_link, or the chain to the
+        # frame that carries the sensor when the bag has no base_link (a handheld camera).
+        spec = parse_pose_source(BAG_DEFAULT if pose.default else pose.source)
+        plan = plan_playback(contents, sensor, spec)
         if isinstance(plan, Refusal):
             pose.player = plan.reason
             continue
