@@ -13,11 +13,14 @@ def format_table(reply: MapReply) -> str:
     """The map as a fixed-width table, with the counters above it."""
     walls = sorted(reply.walls, key=lambda w: w.id)
     lines = [
-        f"{len(walls)} walls from {reply.frames} frames and {reply.observations} "
-        f"observations (frame {reply.frame})",
-        f"{'id':>4} {'u':>8} {'v':>8} {'sigma':>7} {'x0':>8} {'y0':>8} {'x1':>8} {'y1':>8}"
-        f" {'length':>7} {'n_obs':>6}",
+        f"{_count(len(walls), 'wall')} from {_count(reply.frames, 'frame')} and "
+        f"{_count(reply.observations, 'observation')} (frame {reply.frame})",
     ]
+    if walls:
+        lines.append(
+            f"{'id':>4} {'u':>8} {'v':>8} {'sigma':>7} {'x0':>8} {'y0':>8} {'x1':>8} {'y1':>8}"
+            f" {'length':>7} {'n_obs':>6}"
+        )
     for w in walls:
         sigma = max(w.cov[0][0], w.cov[1][1]) ** 0.5
         (x0, y0), (x1, y1) = w.p0, w.p1
@@ -26,6 +29,10 @@ def format_table(reply: MapReply) -> str:
             f" {x1:>8.3f} {y1:>8.3f} {w.length:>7.2f} {w.n_obs:>6}"
         )
     return "\n".join(lines)
+
+
+def _count(n: int, thing: str) -> str:
+    return f"{n} {thing}{'' if n == 1 else 's'}"
 
 
 def to_json(reply: MapReply, **extra: Any) -> str:
