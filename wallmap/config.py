@@ -69,11 +69,11 @@ class ViewSettings:
 
     Attributes:
         host: Address to serve on (127.0.0.1: this machine only).
-        port: HTTP port (0: any free one).
+        port: HTTP port (0: any free one); beside Foxglove's 8765, so both can run at once.
     """
 
     host: str = "127.0.0.1"
-    port: int = 8765
+    port: int = 8766
 
 
 @dataclass(frozen=True)
