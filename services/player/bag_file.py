@@ -6,6 +6,7 @@ old format, a damaged index, a chunk that does not decode, even AssertionError).
 `PlayerError` from either.
 """
 
+import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,8 +45,13 @@ class Topic:
 
 
 def _one_line(err: BaseException) -> str:
-    """A library error as one readable line (some rosbags errors have no text)."""
-    return " ".join(str(err).split()) or type(err).__name__
+    """A library error as one readable line (some rosbags errors have no text).
+
+    rosbags puts a cause's arguments in its text as a tuple (``('Header could not be read',)``):
+    the words are kept, the tuple's quotes and brackets not.
+    """
+    text = re.sub(r"""\((['"])(.*?)\1,\)""", r"\2", str(err))
+    return " ".join(text.split()) or type(err).__name__
 
 
 def _unreadable(path: Path, err: BaseException) -> PlayerError:

@@ -93,6 +93,7 @@ def test_corrupt_bag_is_one_line(tmp_path):
     bag.write_bytes(bag.read_bytes()[:5000])
     out = run_wallmap("player", str(bag), "--connect", "tcp/127.0.0.1:1", expect=1)
     assert_one_line_error(out, "player", "cut.bag")
+    assert "('" not in out.stderr, "the library's reason as words, not as a Python tuple"
 
 
 @pytest.mark.parametrize(
