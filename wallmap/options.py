@@ -263,5 +263,5 @@ def add_command(
         help="set one configuration key (repeatable), e.g. --set detector.seed=3",
     )
     add_options(parser, options)
-    parser.set_defaults(func=func, options=options)
+    parser.set_defaults(func=func, options=options, command_parser=parser)
     return parser

@@ -113,6 +113,7 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["query", "--connect", "garbage"], ["invalid --connect 'garbage'", "<protocol>"]),
         (["router", "--listen", "tcp:7447"], ["invalid --listen 'tcp:7447'"]),
         (["up", "x.bag", "--connect", "garbage"], ["invalid --connect 'garbage'"]),
+        (["up", "x.bag", "--bogus"], ["unrecognized arguments: --bogus", "wallmap up --help"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):
