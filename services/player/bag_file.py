@@ -83,7 +83,10 @@ def _check_path(path: Path) -> None:
         raise PlayerError(f"bag not found: {path}")
     if path.is_dir():
         if not (path / "metadata.yaml").is_file():
-            raise PlayerError(f"{path} is a folder without metadata.yaml; expected {BAG_FORMS}")
+            inside = sorted(p.name for p in path.iterdir() if p.suffix in (".mcap", ".bag"))
+            hint = f" (it holds {', '.join(inside)}: play the file itself)" if inside else ""
+            msg = f"{path} is a folder without metadata.yaml{hint}; expected {BAG_FORMS}"
+            raise PlayerError(msg)
         return
     try:
         with path.open("rb") as file:
