@@ -32,6 +32,17 @@ T = TypeVar("T")
 Tree = dict[str, Any]
 
 
+def require(ok: bool, name: str, rule: str, value: object) -> None:
+    """A dataclass's check of one value: ``NAME must be RULE, got VALUE`` unless ``ok``.
+
+    Raised from ``__post_init__``, so a configuration file, ``--set`` and a flag are held to
+    the same rule, and ``from_tree`` names the section.
+    """
+    if not ok:
+        msg = f"{name} must be {rule}, got {value!r}"
+        raise ValueError(msg)
+
+
 class ConfigError(ValueError):
     """A configuration value, key or file that cannot be used; the message names it."""
 

@@ -41,6 +41,7 @@ import zenoh
 from zenoh import ext
 
 from wallmap.common.codec import MessageError
+from wallmap.common.config_file import require
 from wallmap.common.messages import (
     Frame,
     Observations,
@@ -70,6 +71,10 @@ class History:
 
     seconds: float = 30.0
     max_bytes: int = 512 * 1024 * 1024
+
+    def __post_init__(self) -> None:
+        require(0 < self.seconds < math.inf, "seconds", "a positive number", self.seconds)
+        require(self.max_bytes > 0, "max_bytes", "positive", self.max_bytes)
 
     def samples(self, rate_hz: float = MAX_RATE, sample_bytes: int = 1) -> int:
         """Samples a cache keeps: the window at ``rate_hz``, within ``max_bytes``."""

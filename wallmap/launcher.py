@@ -67,11 +67,17 @@ class _Services:
         return proc
 
     def check_running(self) -> None:
-        """Raises LaunchError if a service (not the player, which ends) has exited."""
-        for name, proc in self._procs:
-            if name != "player" and proc.poll() is not None:
-                msg = f"the {name} exited with status {proc.returncode} while the bag played"
-                raise LaunchError(msg)
+        """Raises LaunchError if a service (not the player, which ends) has exited.
+
+        It names all that have: the first one polled need not be the one that failed first.
+        """
+        ended = [
+            f"the {name} exited with status {proc.returncode}"
+            for name, proc in self._procs
+            if name != "player" and proc.poll() is not None
+        ]
+        if ended:
+            raise LaunchError("; ".join(ended) + " while the bag played")
 
     def stop(self) -> None:
         """Stop them all; raises LaunchError naming those that did not exit with status 0.
@@ -162,6 +168,8 @@ def _check_endpoint(settings: ZenohSettings) -> None:
     if found is None:
         return
     with socket.socket() as probe:
+        # As a router binds: a port left in TIME_WAIT by one just stopped is free to it.
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             probe.bind((found[1].strip("[]"), int(found[2])))
         except OSError as err:

@@ -24,6 +24,7 @@ from typing import Any
 import zenoh
 
 from wallmap.common.codec import SCHEMA_VERSION, MessageError, encode
+from wallmap.common.config_file import require
 from wallmap.common.delivery import (
     ACK_EVERY,
     History,
@@ -82,6 +83,11 @@ class MapperSettings:
     ros2_out: bool = True
     map: MapperConfig = field(default_factory=MapperConfig)
     poses: PoseBufferConfig = field(default_factory=PoseBufferConfig)
+
+    def __post_init__(self) -> None:
+        require(self.pose_wait >= 0, "pose_wait", ">= 0", self.pose_wait)
+        require(self.gap_wait >= 0, "gap_wait", ">= 0", self.gap_wait)
+        require(self.save_every > 0, "save_every", "positive", self.save_every)
 
 
 class MapperCore:

@@ -12,6 +12,7 @@ out to nobody.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -25,6 +26,7 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode, encode
+from wallmap.common.config_file import require
 from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_history_publisher
 from wallmap.common.messages import Frame, Pose, pack
 from wallmap.common.runtime import drain, setup_logging
@@ -72,6 +74,15 @@ class PlayerSettings:
     duration: float | None = None
     loop: bool = False
     paused: bool = False
+
+    def __post_init__(self) -> None:
+        require(0 < self.rate < math.inf, "rate", "a positive number", self.rate)
+        require(self.window >= 1, "window", "at least 1", self.window)
+        require(self.wait_timeout >= 0, "wait_timeout", ">= 0", self.wait_timeout)
+        require(self.stall_timeout > 0, "stall_timeout", "positive", self.stall_timeout)
+        require(self.start >= 0, "start", ">= 0", self.start)
+        duration = self.duration
+        require(duration is None or duration > 0, "duration", "positive", duration)
 
     @property
     def services(self) -> tuple[str, ...]:

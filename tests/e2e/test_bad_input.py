@@ -114,6 +114,10 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["router", "--listen", "tcp:7447"], ["invalid --listen 'tcp:7447'"]),
         (["up", "x.bag", "--connect", "garbage"], ["invalid --connect 'garbage'"]),
         (["up", "x.bag", "--bogus"], ["unrecognized arguments: --bogus", "wallmap up --help"]),
+        # --set and a file are held to the flags' rules: a dataclass checks its own values
+        (["up", "x.bag", "--set", "player.rate=-1"], ["player: rate must be a positive"]),
+        (["config", "--set", "history.seconds=0"], ["history: seconds must be a positive"]),
+        (["config", "--set", "mapper.pose_wait=-1"], ["mapper: pose_wait must be >= 0"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):
