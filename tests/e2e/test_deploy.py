@@ -13,6 +13,7 @@ import struct
 import subprocess
 import sys
 import time
+from fnmatch import fnmatch
 from pathlib import Path
 
 import numpy as np
@@ -80,9 +81,17 @@ def test_compose_and_dockerfile_are_consistent():
     for folder in ("wallmap", "common", "services"):
         assert f"COPY {folder} ./{folder}" in dockerfile
         assert (ROOT / folder).is_dir()
-    for copied in re.findall(r"^COPY (.+) \./$", dockerfile, re.MULTILINE):
-        for name in copied.split():
-            assert (ROOT / name).exists(), f"the Dockerfile copies {name}, which is missing"
+    ignored = [
+        line.strip()
+        for line in (ROOT / ".dockerignore").read_text().splitlines()
+        if line.strip() and not line.startswith("#")
+    ]
+    lines = re.findall(r"^COPY (.+) \./$", dockerfile, re.MULTILINE)
+    copied = [name for line in lines for name in line.split()]
+    for name in [*copied, "wallmap", "common", "services"]:
+        assert (ROOT / name).exists(), f"the Dockerfile copies {name}, which is missing"
+        assert not any(fnmatch(name, pattern) for pattern in ignored), f"{name} is docker-ignored"
+    assert {".git", ".venv"} <= set(ignored), "the build context leaves the repo's bulk out"
     # The compose player reads the sample bag where the image has it: /app is the repo.
     player_bag = interpolate(services["player"]["command"][1], {})
     assert (ROOT / player_bag.removeprefix("/app/")).is_file()
