@@ -76,8 +76,7 @@ class PoseTracker:
 
     def __init__(self, config: OdometryConfig | None = None) -> None:
         self.config = config or OdometryConfig()
-        self.matcher = ScanMatcher(self.config.matcher)
-        self.map_from_odom = se2.matrix(self.config.initial_pose)
+        self.restart()
         self._walls: dict[int, list[WallLine]] = {}
 
     def restart(self) -> None:
