@@ -107,11 +107,12 @@ class MapperCore:
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
-        # Set once UPDATE_FRAMES frames were integrated since the last map update: a bag played
-        # --fast goes through hundreds of frames a second, and the odometry holds its poses onto
-        # the walls of those updates (every UPDATE_PERIOD alone, it would see 150 frames old ones).
+        # Set once UPDATE_FRAMES frames were integrated since the last map update (the map's
+        # count of frames then): a bag played --fast goes through hundreds of frames a second,
+        # and the odometry holds its poses onto the walls of those updates (every
+        # UPDATE_PERIOD alone, it would see 150 frames old ones).
         self.update_due = threading.Event()
-        self.since_update = 0
+        self.updated_frames = self.map.frames
         # Each run's progress, with this process's epoch in every acknowledgement.
         self.progress = RunProgress(runs, epoch=uuid.uuid4().hex[:12])
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
@@ -348,17 +349,16 @@ def _updates(
     is). The markers (the whole served map, rebuilt: tens of ms for a thousand walls) go at
     most every UPDATE_PERIOD s, and once more after the last change.
     """
-    markers_stale, markers_due, frames = False, 0.0, -1
+    markers_stale, markers_due = False, 0.0
     while not stop.is_set():
         core.update_due.wait(UPDATE_PERIOD)
         core.update_due.clear()
         served = None
         with core.lock:
-            core.since_update = 0
             changed = bool(core.map.changed or core.map.removed)
-            grown = changed or core.map.frames != frames
+            grown = changed or core.map.frames != core.updated_frames
             changes = serving.take_changes(core.map) if grown else None
-            frames = core.map.frames
+            core.updated_frames = core.map.frames
             markers_stale |= changed
             if ros2 is not None and markers_stale and time.monotonic() >= markers_due:
                 served = serving.reply(core.map, MapQuery(trajectory=True))
@@ -448,8 +448,7 @@ class _Waiting:
                 if core.corrector is not None and self.corrected is not None:
                     self.corrected.publish(core.corrector, pose, odom_frame)
                 core.dirty = True
-                core.since_update += 1
-                if core.since_update >= UPDATE_FRAMES:
+                if core.map.frames - core.updated_frames >= UPDATE_FRAMES:
                     core.update_due.set()
             self._done(obs, integrated=integrated)
         if integrated:
