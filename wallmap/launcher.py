@@ -98,7 +98,8 @@ class _Services:
                     proc.wait()
                     failed.append(f"the {name} did not stop within {STOP_TIMEOUT:.0f} s")
                     continue
-            if name != "player" and proc.returncode not in (0, -signal.SIGTERM if stopped else 0):
+            clean = proc.returncode == 0 or (stopped and proc.returncode == -signal.SIGTERM)
+            if name != "player" and not clean:
                 failed.append(f"the {name} exited with status {proc.returncode}")
         if failed:
             raise LaunchError("; ".join(failed))
