@@ -20,7 +20,9 @@ from wallmap.common.codec import MessageError
 
 Point = tuple[float, float]
 Segment = tuple[Point, Point]
-COUNTERS = ("dropped", "dropped_reasons", "refused", "skipped", "lost", "missed", "slam")
+COUNTERS = (
+    "dropped", "dropped_reasons", "refused", "skipped", "lost", "missed", "slam", "pose_source",
+)  # fmt: skip
 
 
 def _number(value: Any, name: str) -> float:
@@ -172,7 +174,8 @@ class MapReply:
         walls: The walls asked for.
         merges: ``(merged id, surviving id, stamp)`` of walls found to be one.
         trajectory: Keyframes ``(stamp, x, y, yaw)`` of the poses used, when asked for.
-        counters: The mapper's counters (dropped, refused, skipped, lost, missed, slam...).
+        counters: The mapper's counters (dropped, refused, skipped, lost, missed, slam,
+            pose_source: what the pose judge found of the source).
     """
 
     frame: str = "map"

@@ -229,6 +229,7 @@ class Frame:
     sensor: str = "depth"
     lossless: bool = False
     band: tuple[float, float] | None = None
+    sweep: float = 0.0
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding (the points go as raw bytes)."""
@@ -242,6 +243,7 @@ class Frame:
             "sensor": self.sensor,
             "lossless": self.lossless,
             **({} if self.band is None else {"band": list(self.band)}),
+            **({"sweep": self.sweep} if self.sweep else {}),
         }
 
     @classmethod
@@ -265,7 +267,19 @@ class Frame:
             sensor=_sensor(m),
             lossless=_flag(m, "lossless"),
             band=_band(m),
+            sweep=_sweep(m),
         )
+
+
+def _sweep(m: dict[str, Any]) -> float:
+    """The optional ``sweep``: seconds the frame's capture spans, not deskewed (0: an instant)."""
+    if m.get("sweep") is None:
+        return 0.0
+    sweep = _finite(m, "sweep")
+    if not 0.0 <= sweep <= 10.0:
+        msg = f"field 'sweep' must be 0-10 s, got {sweep}"
+        raise MessageError(msg)
+    return sweep
 
 
 def _band(m: dict[str, Any]) -> tuple[float, float] | None:
@@ -349,6 +363,7 @@ class Observations:
     rays: Array | None = None
     sensor: str = "depth"
     skipped: bool = False
+    sweep: float = 0.0
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
@@ -362,6 +377,8 @@ class Observations:
             "sensor": self.sensor,
             "skipped": self.skipped,
         }
+        if self.sweep:
+            m["sweep"] = self.sweep
         if self.rays is not None and self.ray_origin is not None:
             m["free"] = {"origin": self.ray_origin.tolist(), "ends": self.rays.tolist()}
         return m
@@ -386,6 +403,7 @@ class Observations:
             rays=rays,
             sensor=_sensor(m),
             skipped=_flag(m, "skipped"),
+            sweep=_sweep(m),
         )
 
 

@@ -8,9 +8,9 @@ import signal
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -74,8 +74,17 @@ class Presence:
     Both stay declared while this object lives; ``undeclare`` ends them at shutdown.
     """
 
-    def __init__(self, session: zenoh.Session, keys: Keys, service: str, stats: Stats) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        service: str,
+        stats: Stats,
+        details: Callable[[], dict[str, Any]] | None = None,
+    ) -> None:
+        """``details``: more of the service's state for its reply (quick: no lock, no wait)."""
         self._service, self._stats, self._started = service, stats, time.time()
+        self._details = details
         self.token = session.liveliness().declare_token(keys.health(service))
         # Replying to the query at hand from its callback is quick: one locked copy.
         self.queryable = session.declare_queryable(keys.stats(service), self._reply)
@@ -85,6 +94,7 @@ class Presence:
             "service": self._service,
             "uptime": time.time() - self._started,
             "counters": self._stats.snapshot(),
+            **(self._details() if self._details is not None else {}),
         }
         query.reply(query.key_expr, encode(body))
 

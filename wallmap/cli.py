@@ -19,7 +19,7 @@ from typing import NoReturn
 import zenoh
 
 from wallmap import __version__
-from wallmap.arg_types import positive
+from wallmap.arg_types import finite, non_negative, positive
 from wallmap.common.delivery import StalledError
 from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.map_records import MapReply
@@ -47,6 +47,7 @@ from wallmap.options import (
     MAPPER,
     ODOMETRY,
     PLAYER,
+    POSES,
     SLAM,
     SOURCE,
     SPEED,
@@ -58,7 +59,8 @@ from wallmap.options import (
     given,
 )
 from wallmap.plot import write_picture
-from wallmap.scene import Camera, write_scene_bag
+from wallmap.scene import Camera, Glitch, PoseFaults, write_scene_bag
+from wallmap.scene.bags import tum_path_for
 from wallmap.services.detector import service as detector_service
 from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import make_pose_input
@@ -76,7 +78,8 @@ FAILURES = (
 )  # fmt: skip
 SERVICE = math.inf  # services wait for their router as long as it takes
 ALL = (
-    ZENOH, HISTORY, SPEED, SOURCE, PLAYER, BAND, DETECTOR, STATE, MAPPER, SLAM, ODOMETRY, UP, VIEW,
+    ZENOH, HISTORY, SPEED, SOURCE, PLAYER, BAND, DETECTOR, STATE, MAPPER, POSES, SLAM, ODOMETRY,
+    UP, VIEW,
 )  # fmt: skip
 
 
@@ -174,6 +177,13 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
     if args.format == "ros1" and args.out.suffix != ".bag":
         msg = f"a ROS 1 bag's name ends in .bag (the player reads it by its suffix): {args.out}"
         raise ValueError(msg)
+    faults = PoseFaults(
+        latency=args.pose_latency,
+        heading_sd_deg=args.pose_noise,
+        position_sd=args.pose_position_noise,
+        glitches=tuple(args.glitch or ()),
+        seed=args.seed,
+    )
     info = write_scene_bag(
         args.out,
         seed=args.seed,
@@ -183,10 +193,13 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
         camera=Camera(width=args.width, height=args.height),
         rate_hz=args.rate,
         compress=args.compress,
+        faults=faults,
     )
     seen = sum(1 for n in info.seen_counts.values() if n >= 3)
     print(f"wrote {info.path}: {info.n_frames} frames, {seen} walls seen in 3 frames or more")
     print(f"ground truth: {info.truth_path}")
+    if faults.any:
+        print(f"the faulty poses as a TUM file: {tum_path_for(info.path)}")
     return 0
 
 
@@ -246,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_command(sub, "detector", "sensor frames -> wall observations", _cmd_detector,
                 DETECTOR, BAND, HISTORY, ZENOH)  # fmt: skip
     add_command(sub, "mapper", "the EKF wall map, served as a queryable", _cmd_mapper,
-                STATE, MAPPER, SLAM, HISTORY, ZENOH)  # fmt: skip
+                STATE, MAPPER, POSES, SLAM, HISTORY, ZENOH)  # fmt: skip
     add_command(sub, "odometry", "poses from the sensor frames (scan matching)", _cmd_odometry,
                 ODOMETRY, HISTORY, ZENOH)  # fmt: skip
 
@@ -261,7 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for answers")
 
     p = add_command(sub, "up", "router + detector + mapper (+ odometry) + player, one machine",
-                    _cmd_up, SPEED, SOURCE, BAND, STATE, SLAM, UP, HISTORY, ZENOH)  # fmt: skip
+                    _cmd_up, SPEED, SOURCE, BAND, STATE, POSES, SLAM, UP, HISTORY,
+                    ZENOH)  # fmt: skip
     _add_bag_argument(p)
 
     p = add_command(sub, "plot", "draw the current map (.png or .svg)", _cmd_plot, ZENOH)
@@ -285,6 +299,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--height", type=int, default=120, help="image height (px)")
     p.add_argument("--rate", type=positive, default=15.0, help="frames per second")
     p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
+    p.add_argument("--pose-latency", type=finite, default=0.0, metavar="SECONDS",
+                   help="every pose source of the bag late by this: its pose stamped t is the "
+                   "robot's at t - SECONDS")  # fmt: skip
+    p.add_argument("--pose-noise", type=non_negative, default=0.0, metavar="DEG",
+                   help="white noise of every pose's heading (degrees)")  # fmt: skip
+    p.add_argument("--pose-position-noise", type=non_negative, default=0.0, metavar="M",
+                   help="white noise of every pose's position (m)")  # fmt: skip
+    p.add_argument("--glitch", type=Glitch.parse, action="append", metavar="START:DUR:DEG:M",
+                   help="a stretch of wrong poses: from START s for DUR s, DEG degrees and M "
+                   "metres off (repeatable)")  # fmt: skip
 
     p = add_command(sub, "demo", "run the pipeline on the sample bag shipped with wallmap",
                     _cmd_demo)  # fmt: skip

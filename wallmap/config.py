@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -99,6 +99,19 @@ class Config:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     up: UpSettings = field(default_factory=UpSettings)
     view: ViewSettings = field(default_factory=ViewSettings)
+
+
+def with_odometry_poses(config: Config) -> Config:
+    """With ``up.odometry`` the poses are the scan matcher's: latency 0, not estimated.
+
+    The scan matcher makes each pose at its frame's own stamp, so its latency is 0 by
+    construction (unless the user gives one).
+    """
+    judge = config.mapper.judge
+    if not config.up.odometry or judge.latency is not None:
+        return config
+    mapper = replace(config.mapper, judge=replace(judge, latency=0.0))
+    return replace(config, mapper=mapper)
 
 
 def environment(env: Mapping[str, str]) -> Tree:

@@ -23,11 +23,13 @@ from wallmap.doctor_facts import (
     ChainFacts,
     ClockFacts,
     Intervals,
+    LatencyFacts,
     Report,
     SensorFacts,
     TopicFacts,
 )
 from wallmap.doctor_inspect import inspect_bag, inspect_tum
+from wallmap.offline import judged_source
 from wallmap.options import SOURCE
 from wallmap.options import add_command as add_options_command
 from wallmap.services.player.bag_contents import (
@@ -37,6 +39,7 @@ from wallmap.services.player.bag_contents import (
     POINTCLOUD2,
     TF_TYPES,
 )
+from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.tum_folder import (
     is_tum_folder,
 )
@@ -341,7 +344,7 @@ def _tum_text(report: Report) -> list[str]:
         lines += _wrap("poses", f"{pose.source}: {what}")
     if report.placement:
         lines += _wrap("level", report.placement)
-    return lines
+    return lines + _latency_text(report.latency)
 
 
 def render_text(report: Report) -> str:
@@ -360,8 +363,43 @@ def render_text(report: Report) -> str:
         if report.placement:
             lines += _wrap("level", report.placement)
         lines += _warnings(report.warnings)
+    lines += _latency_text(report.latency)
     lines += _wrap("verdict", report.verdict.text)
     return "\n".join(lines)
+
+
+def _latency_text(latency: LatencyFacts | None) -> list[str]:
+    if latency is None:
+        return []
+    if latency.seconds is None:
+        return _wrap("latency", latency.note)
+    return _wrap(
+        "latency",
+        f"{latency.seconds:+.3f} s (sd {latency.sd or 0.0:.3f} s) {latency.note}; "
+        f"--pose-latency S fixes it",
+    )
+
+
+def _latency(path: Path, config: Config, frames: int) -> LatencyFacts:
+    """The latency the mapper would estimate, from the first ``frames`` run as it runs them."""
+    try:
+        found = judged_source(path, config, frames)
+    except PlayerError as err:
+        return LatencyFacts(None, None, 0, f"not estimated: {err}")
+    if found is None:
+        return LatencyFacts(None, None, 0, "not estimated: the poses are taken as they come")
+    if found["latency_fixed"]:
+        note = f"{found['latency_s']:+.3f} s, as given (--pose-latency)"
+        return LatencyFacts(None, None, 0, note)
+    judged = found["frames_judged"] + found["frames_unjudged"]
+    if not found["settled"]:
+        note = (
+            f"not estimated: the first {judged} frames do not say it (the sensor hardly "
+            "turns, or sees few walls); the mapper estimates it as it goes"
+        )
+        return LatencyFacts(None, None, judged, note)
+    note = f"estimated from how the first {judged} frames' walls turn against the poses"
+    return LatencyFacts(found["latency_s"], found["latency_sd_s"], judged, note)
 
 
 def report_json(report: Report) -> str:
@@ -377,6 +415,8 @@ def _cmd_doctor(args: argparse.Namespace, config: Config) -> int:
         report = inspect_tum(args.bag, source)
     else:
         report = inspect_bag(args.bag, source.sensor_topic)
+    if args.latency and report.verdict.status == "ready":
+        report.latency = _latency(args.bag, config, args.latency_frames)
     print(report_json(report) if args.json else render_text(report))
     return report.exit_status
 
@@ -398,3 +438,8 @@ def add_command(sub: Any) -> None:
         help="ROS 1 .bag file, ROS 2 bag folder, .mcap file or TUM RGB-D folder",
     )
     p.add_argument("--json", action="store_true", help="the same facts as JSON, for scripts")
+    p.add_argument("--latency", action=argparse.BooleanOptionalAction, default=True,
+                   help="estimate the pose source's latency as the mapper would, from the first "
+                   "frames (a few seconds of work)")  # fmt: skip
+    p.add_argument("--latency-frames", type=int, default=400, metavar="N",
+                   help="frames the latency is estimated from")  # fmt: skip

@@ -221,6 +221,24 @@ class Verdict:
 
 
 @dataclass
+class LatencyFacts:
+    """The pose source's latency the mapper would use, as the walls estimate it.
+
+    Attributes:
+        seconds: The latency (s): the source's pose of an instant is stamped this much later;
+            None where it could not be estimated (``note`` says why).
+        sd: Its standard deviation (s).
+        frames: The frames it was estimated from.
+        note: Why there is no estimate, or how it was had.
+    """
+
+    seconds: float | None
+    sd: float | None
+    frames: int
+    note: str
+
+
+@dataclass
 class Report:
     """Everything ``wallmap doctor`` says about one bag.
 
@@ -238,6 +256,7 @@ class Report:
         clock: Stamps of the sensor topic and the pose topics.
         warnings: What the player would warn about with the recommended pose source.
         placement: How the player would place the frames with it (level, floor, band).
+        latency: The pose source's latency the mapper would use (``--latency``: estimated).
         verdict: The conclusion.
     """
 
@@ -254,6 +273,7 @@ class Report:
     clock: list[ClockFacts] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     placement: str | None = None
+    latency: LatencyFacts | None = None
     verdict: Verdict = field(default_factory=lambda: Verdict("refused", "not inspected"))
 
     @property

@@ -55,7 +55,7 @@ from wallmap.services.player.choices import (
     plan_playback,
 )
 from wallmap.services.player.errors import PlayerError, Refusal, decided
-from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE
+from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE, default_source
 from wallmap.services.player.pose_sources import (
     BAG_DEFAULT,
     PoseSourceSpec,
@@ -354,7 +354,9 @@ def _judge_poses(report: Report, bag: BagFile, contents: BagContents, sensor: Se
             continue
         # The default is judged as the player takes it: map -> base_link, or the chain to the
         # frame that carries the sensor when the bag has no base_link (a handheld camera).
-        spec = parse_pose_source(BAG_DEFAULT if pose.default else pose.source)
+        spec, note = parse_pose_source(BAG_DEFAULT if pose.default else pose.source), None
+        if pose.default:
+            spec, note = default_source(spec, bag.topics)
         plan = plan_playback(contents, sensor, spec)
         if isinstance(plan, Refusal):
             pose.player = plan.reason
@@ -366,7 +368,7 @@ def _judge_poses(report: Report, bag: BagFile, contents: BagContents, sensor: Se
             pose.player = placed.reason
             continue
         plan, placement = placed
-        pose.player, pose.warnings = "ok", plan.warnings
+        pose.player, pose.warnings = "ok", [*filter(None, [note]), *plan.warnings]
         pose.placement = placement.describe() or None
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
-from wallmap.config import Config, UpSettings, to_plain, to_toml
+from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
 from wallmap.evaluation import evaluate_map
 from wallmap.map_client import format_table, to_json
 from wallmap.plot import write_picture
@@ -122,6 +122,7 @@ def for_services(config: Config) -> Config:
 
     With ``up.odometry`` the odometry service makes the poses, so the player sends none.
     """
+    config = with_odometry_poses(config)
     services = ("detector", "mapper") + (("odometry",) if config.up.odometry else ())
     player = replace(config.player, wait_for=services)
     if config.up.odometry:

@@ -16,6 +16,9 @@ def format_table(reply: MapReply) -> str:
         f"{_count(len(walls), 'wall')} from {_count(reply.frames, 'frame')} and "
         f"{_count(reply.observations, 'observation')} (frame {reply.frame})",
     ]
+    judged = reply.counters.get("pose_source")
+    if isinstance(judged, dict) and judged:
+        lines.append(describe_pose_source(judged))
     if walls:
         lines.append(
             f"{'id':>4} {'u':>8} {'v':>8} {'sigma':>7} {'x0':>8} {'y0':>8} {'x1':>8} {'y1':>8}"
@@ -29,6 +32,17 @@ def format_table(reply: MapReply) -> str:
             f" {x1:>8.3f} {y1:>8.3f} {w.length:>7.2f} {w.n_obs:>6}"
         )
     return "\n".join(lines)
+
+
+def describe_pose_source(found: dict[str, Any]) -> str:
+    """What the pose judge found of the pose source (the reply's ``pose_source``), one line."""
+    how = "given" if found.get("latency_fixed") else "estimated"
+    return (
+        f"poses: latency {found['latency_s'] * 1e3:+.0f} ms ({how}), noise "
+        f"{found['position_sd_m'] * 100:.1f} cm / {found['heading_sd_deg']:.2f} deg; frames "
+        f"corrected {found['frames_corrected']}, recovered {found['frames_recovered']}, "
+        f"refused {found['frames_refused']}, unjudged {found['frames_unjudged']}"
+    )
 
 
 def _count(n: int, thing: str) -> str:

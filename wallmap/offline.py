@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,11 +20,12 @@ from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, Pose
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.se2 import transform_points
-from wallmap.config import Config
+from wallmap.config import Config, with_odometry_poses
 from wallmap.services.mapper import serving
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Pipeline
 from wallmap.services.player.bag_contents import LASERSCAN
+from wallmap.services.player.pose_stream import stream_of
 from wallmap.services.player.sources import SourceOptions, open_source
 
 Array = NDArray[np.float64]
@@ -31,11 +33,14 @@ Array = NDArray[np.float64]
 
 def pipeline_for(config: Config) -> Pipeline:
     """The pipeline a configuration makes (``up.odometry``: poses from the scans)."""
+    config = with_odometry_poses(config)
     return Pipeline(
         config.detector,
         config.mapper.map,
         config.mapper.slam,
         config.odometry if config.up.odometry else None,
+        config.mapper.judge,
+        config.mapper.poses,
     )
 
 
@@ -44,6 +49,28 @@ def map_bag(bag: Path, config: Config | None = None, poses: list[Pose] | None = 
 
     ``poses``: if given, every pose a frame was mapped from is appended to it.
     """
+    return run_bag(bag, config, poses).map
+
+
+def judged_source(
+    bag: Path, config: Config | None = None, frames: int = 400
+) -> dict[str, Any] | None:
+    """What the pose judge finds of a recording's pose source over its first ``frames``.
+
+    The map reply's ``pose_source`` (latency, noise, frames corrected and refused), as the
+    mapper would have it after those frames; None when the poses are not judged.
+    """
+    judge = run_bag(bag, config, frames=frames).mapping.judge
+    return None if judge is None else judge.summary()
+
+
+def run_bag(
+    bag: Path,
+    config: Config | None = None,
+    poses: list[Pose] | None = None,
+    frames: int | None = None,
+) -> Pipeline:
+    """A recording (its first ``frames``, or all) through the pipeline; the pipeline after it."""
     config = config or Config()
     pipeline = pipeline_for(config)
     source = config.player.source
@@ -51,15 +78,20 @@ def map_bag(bag: Path, config: Config | None = None, poses: list[Pose] | None = 
         source = replace(source, pose_source="none")
     with open_source(bag, source) as recording:
         sensor = "scan" if recording.sensor_type == LASERSCAN else "depth"
-        for seq, (frame, pose) in enumerate(recording.frames(pipeline.rows)):
+        stream = stream_of(recording)
+        for seq, (frame, _) in enumerate(recording.frames(pipeline.rows)):
+            if frames is not None and seq >= frames:
+                break
+            for pose in stream.until(frame.stamp):
+                pipeline.add_pose(pose)
             message = Frame(
                 "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor,
-                sensor, band=frame.band,
+                sensor, band=frame.band, sweep=frame.sweep,
             )  # fmt: skip
-            step = pipeline.step(message, pose)
-            if step is not None and poses is not None:
+            step = pipeline.step(message)
+            if step is not None and step.pose is not None and poses is not None:
                 poses.append(step.pose)
-    return pipeline.map
+    return pipeline
 
 
 def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[float, Array]]:

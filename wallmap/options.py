@@ -198,6 +198,14 @@ SLAM = (
            "{prefix}/pose/correction", const=True),
 )  # fmt: skip
 
+POSES = (
+    Option("--trust-poses", "mapper.judge.enabled", "take every pose as it comes: do not judge "
+           "it against the walls (nor estimate its latency)", const=False),
+    Option("--pose-latency", "mapper.judge.latency", "the pose source's latency: its pose of an "
+           "instant is stamped this much later (not set: estimated from the walls)", finite,
+           metavar="SECONDS"),
+)  # fmt: skip
+
 STATE = (
     Option("--state", "mapper.state", "keep the map in FILE across restarts", Path, metavar="FILE"),
 )

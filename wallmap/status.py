@@ -9,6 +9,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.transport import Keys
+from wallmap.map_client import describe_pose_source
 
 
 def fetch_status(session: zenoh.Session, keys: Keys, timeout: float = 2.0) -> list[dict[str, Any]]:
@@ -42,6 +43,7 @@ def fetch_status(session: zenoh.Session, keys: Keys, timeout: float = 2.0) -> li
             "live": True,
             "uptime": counters.get(name, {}).get("uptime"),
             "counters": counters.get(name, {}).get("counters", {}),
+            **({"pose_source": s} if (s := counters.get(name, {}).get("pose_source")) else {}),
         }
         for name in live
     ]
@@ -57,6 +59,8 @@ def format_status(services: list[dict[str, Any]], prefix: str) -> str:
         uptime = "-" if entry["uptime"] is None else f"{entry['uptime']:.0f} s"
         counters = ", ".join(f"{k} {v}" for k, v in sorted(entry["counters"].items())) or "-"
         lines.append(f"{entry['service']:<{width}}  {uptime:>8}  {counters}")
+        if isinstance(entry.get("pose_source"), dict):
+            lines.append(f"{'':<{width}}  {'':>8}  {describe_pose_source(entry['pose_source'])}")
     return "\n".join(lines)
 
 

@@ -124,4 +124,5 @@ class WallDetector:
             ray_origin=origin,
             rays=rays,
             sensor=frame.sensor,
+            sweep=frame.sweep,
         )

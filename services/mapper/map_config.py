@@ -62,6 +62,7 @@ class MapperConfig:
         fan_angle: of two confirmed walls within this angle (rad)...
         fan_offset: ...and this distance (m) whose segments overlap by more than...
         fan_overlap: ...this (m), only the one seen more often is served (see ``_fanned``).
+        fan_share: ...and for a wall seen mostly by a scanner, by this share of its length too.
         min_length: a wall whose served segments add up to less than this (m) is served as
             tentative: the detector reports no shorter line, so such a wall is a sliver of one.
         confirm_obs: a wall is tentative (a possible phantom) until seen this many times...
@@ -90,6 +91,7 @@ class MapperConfig:
     fan_angle: float = np.radians(8.0)
     fan_offset: float = 0.30
     fan_overlap: float = 0.3
+    fan_share: float = 0.5
     min_length: float = 0.25
     confirm_obs: int = 3
     confirm_views: int = 2

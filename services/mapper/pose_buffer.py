@@ -12,10 +12,13 @@ import bisect
 import enum
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from wallmap.common import se2
 from wallmap.common.messages import Pose
+from wallmap.common.se2 import Array
 
 log = logging.getLogger("wallmap.mapper")
 
@@ -41,7 +44,7 @@ class PoseBufferConfig:
     """
 
     max_age: float = 120.0
-    max_gap: float = 0.5
+    max_gap: float = 1.0
     tolerance: float = 0.02
     jump_distance: float = 0.5
     jump_angle: float = 0.5
@@ -60,6 +63,30 @@ def _interpolate(a: Pose, b: Pose, stamp: float) -> Pose:
         frame=a.frame,
         child=a.child,
     )
+
+
+@dataclass(frozen=True)
+class SourcePose:
+    """The source's pose at a stamp, as the pose judge needs it.
+
+    Attributes:
+        pose: The pose, interpolated (or extrapolated a little) at the stamp.
+        velocity: The source's velocity there (x, y, yaw per second, map frame), from the poses
+            either side: a late source's error is this velocity times its latency.
+        gap: Seconds between the two poses it was interpolated between (0 at a pose): over a
+            tracker's dropout the interpolated pose is a guess, and is judged as one.
+    """
+
+    pose: Pose
+    velocity: Array
+    gap: float
+
+
+def _velocity(a: Pose, b: Pose) -> Array:
+    dt = b.stamp - a.stamp
+    if dt <= 0:
+        return np.zeros(3)
+    return np.array([(b.x - a.x) / dt, (b.y - a.y) / dt, se2.wrap(b.yaw - a.yaw) / dt])
 
 
 class PoseBuffer:
@@ -124,3 +151,50 @@ class PoseBuffer:
             near = min((before, after), key=lambda p: abs(p.stamp - stamp))
             return near if abs(near.stamp - stamp) <= tol else Lookup.MISSING
         return _interpolate(before, after, stamp)
+
+    def sample(self, stamp: float, *, extrapolate: float = 0.0) -> SourcePose | Lookup:
+        """The pose at ``stamp`` with the source's velocity there, or why there is none.
+
+        ``extrapolate``: how far (s) beyond the newest pose the pose may be carried on at the
+        newest velocity, where a latency estimate asks for a pose the source has not sent yet
+        (the end of a run).
+        """
+        found = self.lookup(stamp)
+        newest = self._stamps[-1] if self._stamps else None
+        if found is Lookup.WAIT and newest is not None and stamp - newest <= extrapolate:
+            last = self._poses[-1]
+            velocity = self._velocity_at(len(self._poses) - 1)
+            ahead = stamp - newest
+            moved = replace(
+                last,
+                stamp=stamp,
+                x=last.x + velocity[0] * ahead,
+                y=last.y + velocity[1] * ahead,
+                yaw=se2.wrap(last.yaw + velocity[2] * ahead),
+            )
+            return SourcePose(moved, velocity, ahead)
+        if isinstance(found, Lookup):
+            return found
+        i = bisect.bisect_left(self._stamps, stamp)
+        if (i < len(self._stamps) and self._stamps[i] == stamp) or i in (0, len(self._stamps)):
+            index = min(i, len(self._stamps) - 1)
+            return SourcePose(found, self._velocity_at(index), 0.0)
+        before, after = self._poses[i - 1], self._poses[i]
+        return SourcePose(found, _velocity(before, after), after.stamp - before.stamp)
+
+    def _velocity_at(self, i: int) -> Array:
+        """The velocity at pose ``i``, from its neighbours."""
+        low, high = max(i - 1, 0), min(i + 1, len(self._poses) - 1)
+        return _velocity(self._poses[low], self._poses[high])
+
+    def headings(self, start: float, end: float) -> tuple[Array, Array]:
+        """The stamps and unwrapped headings of the poses from ``start`` to ``end``.
+
+        One pose either side is included: what a latency estimate reads the source's turning
+        from.
+        """
+        low = max(bisect.bisect_left(self._stamps, start) - 1, 0)
+        high = min(bisect.bisect_right(self._stamps, end) + 1, len(self._stamps))
+        poses = self._poses[low:high]
+        stamps = np.array([p.stamp for p in poses])
+        return stamps, np.unwrap(np.array([p.yaw for p in poses]))

@@ -38,9 +38,10 @@ from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.mapper import serving, state_file
 from wallmap.services.mapper.map_config import MapperConfig
-from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig
+from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig, SourcePose
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
+from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
 from wallmap.services.mapper.ros2_out import Ros2Outlet
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Mapping
@@ -51,6 +52,7 @@ UPDATE_PERIOD = 0.5  # s between map updates while busy
 UPDATE_FRAMES = 5  # frames integrated that make an update due sooner (a bag played --fast)
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 BACKLOG = "backlog"  # dropped because MAX_PENDING newer frames wait for poses too
+LATENCY_WAIT = 0.5  # s a frame waits for the pose its latency asks for, before extrapolating
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,7 @@ class MapperSettings:
             frames come back from the history meanwhile, or are given up and counted as lost.
         save_every: seconds between state saves while the map changes.
         slam: take the poses as odometry and correct them with the walls (``--slam``).
+        judge: how every pose is judged against the walls (``--trust-poses``, ``--pose-latency``).
         ros2_out: publish the map as ROS 2 markers and a path (``services.mapper.ros2_out``).
         map: how the map associates, merges and serves walls.
         poses: how long poses are kept and how far they are interpolated.
@@ -80,6 +83,7 @@ class MapperSettings:
     gap_wait: float = 10.0
     save_every: float = 2.0
     slam: SlamConfig = field(default_factory=SlamConfig)
+    judge: JudgeConfig = field(default_factory=JudgeConfig)
     ros2_out: bool = True
     map: MapperConfig = field(default_factory=MapperConfig)
     poses: PoseBufferConfig = field(default_factory=PoseBufferConfig)
@@ -97,13 +101,14 @@ class MapperCore:
     ``--slam``, the pose correction.
     """
 
-    def __init__(
-        self, mapping: Mapping, poses: PoseBuffer, stats: Stats, runs: Iterable[Progress] = ()
-    ) -> None:
+    def __init__(self, mapping: Mapping, stats: Stats, runs: Iterable[Progress] = ()) -> None:
         self.mapping = mapping
-        self.map = mapping.map
         self.corrector = mapping.corrector  # --slam
-        self.poses = poses
+        self.judge = mapping.judge  # every pose judged against the walls (the default)
+        self.poses = mapping.poses
+        # What the judge found of the pose source, for `wallmap status`: replaced (never
+        # changed in place) after each frame, so the status queryable reads it without a lock.
+        self.pose_source: dict[str, Any] = {} if self.judge is None else self.judge.summary()
         self.stats = stats
         self.lock = threading.Condition()
         self.dirty = False
@@ -116,6 +121,22 @@ class MapperCore:
         # Each run's progress, with this process's epoch in every acknowledgement.
         self.progress = RunProgress(runs, epoch=uuid.uuid4().hex[:12])
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state
+
+    @property
+    def map(self) -> WallMap:
+        """The wall map (the mapping's: a remap replaces it)."""
+        return self.mapping.map
+
+    def source_pose(self, stamp: float, waited: float) -> SourcePose | Lookup:
+        """The source's pose for the instant ``stamp``, at the stamp its latency says.
+
+        A latency estimate may ask for a pose the source has not sent (yet, or ever, at the
+        end of a run): after LATENCY_WAIT the newest pose is carried on to it, up to the
+        lookahead the judge allows. Call with the lock held.
+        """
+        mapping = self.mapping
+        ahead = mapping.lookahead if waited >= LATENCY_WAIT else 0.0
+        return self.poses.sample(mapping.source_stamp(stamp), extrapolate=ahead)
 
     def reply(self, query: MapQuery, fmt: str) -> bytes:
         """The encoded map reply plus the mapper's counters, built once per map state.
@@ -137,6 +158,8 @@ class MapperCore:
         with self.lock:
             if self.corrector is not None:
                 extra["slam"] = self.corrector.summary()
+            if self.judge is not None:
+                extra["pose_source"] = self.pose_source
             state = (self.map.version, len(self.map.merges), json.dumps(extra))
             if self._replies and next(iter(self._replies))[0] != state:
                 self._replies.clear()
@@ -195,7 +218,7 @@ def run(
         ]
         for worker in workers:
             worker.start()
-        token = Presence(session, keys, "mapper", stats)
+        token = Presence(session, keys, "mapper", stats, lambda: _details(core))
         log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
         while not stop.wait(mapper.save_every):
             _save(core, mapper.state, config)
@@ -207,6 +230,11 @@ def run(
             worker.join(timeout=5.0)
     _save(core, mapper.state, config)
     return stats
+
+
+def _details(core: MapperCore) -> dict[str, Any]:
+    """What ``wallmap status`` shows of the mapper beyond its counters (no lock: a snapshot)."""
+    return {"pose_source": core.pose_source} if core.judge is not None else {}
 
 
 def _missed(stats: Stats, what: str) -> Callable[[int], None]:
@@ -225,21 +253,39 @@ def _restore(mapper: MapperSettings, stats: Stats, log: logging.Logger) -> Mappe
     corrector = _corrector(mapper)
     if corrector is not None:
         corrector.check(wall_map)
-    mapping = Mapping(wall_map=wall_map, corrector=corrector)
-    return MapperCore(mapping, PoseBuffer(mapper.poses), stats, runs)
+    judge = _judge(mapper) if corrector is None else None
+    mapping = Mapping(
+        judge=mapper.judge, wall_map=wall_map, corrector=corrector, judged=judge,
+        poses=PoseBuffer(mapper.poses),
+    )  # fmt: skip
+    return MapperCore(mapping, stats, runs)
 
 
 def _corrector(mapper: MapperSettings) -> PoseCorrector | None:
     """The pose correction of ``--slam``, from the state file when it has one."""
     if not mapper.slam.enabled:
         return None
-    saved = state_file.load_slam(mapper.state) if mapper.state else None
+    saved = state_file.load_entry(mapper.state, "slam") if mapper.state else None
     if saved is None:
         return PoseCorrector(mapper.slam)
     try:
         return PoseCorrector.from_json(saved, mapper.slam)
     except (KeyError, TypeError, ValueError) as err:
         msg = f"state file {mapper.state} has an unusable 'slam' entry ({err}); move it away"
+        raise state_file.StateError(msg) from err
+
+
+def _judge(mapper: MapperSettings) -> PoseJudge | None:
+    """The pose judge, from the state file when it has one (what it learnt of the source)."""
+    if not mapper.judge.enabled:
+        return None
+    saved = state_file.load_entry(mapper.state, "poses") if mapper.state else None
+    if saved is None:
+        return PoseJudge(mapper.judge)
+    try:
+        return PoseJudge.from_json(saved, mapper.judge)
+    except (KeyError, TypeError, ValueError) as err:
+        msg = f"state file {mapper.state} has an unusable 'poses' entry ({err}); move it away"
         raise state_file.StateError(msg) from err
 
 
@@ -284,7 +330,9 @@ def _save(core: MapperCore, path: Path | None, config: dict[str, Any] | None) ->
         if not core.dirty:
             return
         slam = core.corrector.to_json() if core.corrector is not None else None
-        document = state_file.to_json(core.map, core.progress.runs.values(), slam, config)
+        poses = core.judge.to_json() if core.judge is not None else None
+        runs = core.progress.runs.values()
+        document = state_file.to_json(core.map, runs, slam, config, poses)
         core.dirty = False
     state_file.write(path, document)
 
@@ -436,17 +484,18 @@ class _Waiting:
             core.stats.add("skipped")
             return True
         with core.lock:
-            pose = core.poses.lookup(obs.stamp)
-            if pose is Lookup.WAIT and time.monotonic() - arrived < self.pose_wait:
+            source = core.source_pose(obs.stamp, time.monotonic() - arrived)
+            if source is Lookup.WAIT and time.monotonic() - arrived < self.pose_wait:
                 core.lock.wait(timeout=0.05)  # woken by a new pose
                 return False
             self.pending.popleft()
-            integrated = not isinstance(pose, Lookup)
-            if integrated:
-                odom_frame = pose.frame
-                pose = core.mapping.integrate(obs, pose)
-                if core.corrector is not None and self.corrected is not None:
-                    self.corrected.publish(core.corrector, pose, odom_frame)
+            integrated = not isinstance(source, Lookup)
+            if isinstance(source, SourcePose):
+                pose = core.mapping.integrate(obs, source)
+                if core.corrector is not None and self.corrected is not None and pose:
+                    self.corrected.publish(core.corrector, pose, source.pose.frame)
+                if core.judge is not None:
+                    core.pose_source = core.judge.summary()
                 core.dirty = True
                 if core.map.frames - core.updated_frames >= UPDATE_FRAMES:
                     core.update_due.set()
@@ -454,7 +503,7 @@ class _Waiting:
         if integrated:
             core.stats.add("integrated")
         else:
-            _count_drop(core.stats, obs, DROP_REASONS[pose], self.pose_wait)
+            _count_drop(core.stats, obs, DROP_REASONS[source], self.pose_wait)
         return True
 
     def _done(self, obs: Observations, *, integrated: bool) -> None:

@@ -115,13 +115,15 @@ def _fanned(wall_map: WallMap, wall: Wall, pieces: Array) -> bool:
     On real clutter a surface and what stands against it (a cabinet front, appliances on a
     counter) come out as lines a few degrees and centimetres apart. Of two confirmed walls
     within ``fan_angle`` and ``fan_offset`` whose segments overlap by ``fan_overlap``, only
-    the one seen more often (the older on a tie) is served. Walls seen mostly by a scanner
-    are left alone: its one plane sees no clutter stand against walls, and a bent wall's
-    near-parallel pieces are each where its points are.
+    the one seen more often (the older on a tie) is served. A scanner sees no clutter stand
+    against walls, but it sees a bent wall (panels a few degrees apart, a bowed board) whole
+    from afar and in pieces from near: the whole's line and a piece's overlap along most of
+    the piece, and only the better seen is served. For a wall seen mostly by a scanner the
+    overlap must also be ``fan_share`` of its length: the pieces of a bent wall, each seen
+    where its points are, overlap only where they meet.
     """
     cfg = wall_map.config
-    if 2 * wall.depth_obs <= wall.n_obs:
-        return False
+    scanned = 2 * wall.depth_obs <= wall.n_obs
     cos_max = math.cos(cfg.fan_angle)
     ta = wall.along(pieces.reshape(-1, 2))
     for other in (wall_map.walls[i] for i in sorted(wall_map.index.near(wall.ends))):
@@ -129,12 +131,11 @@ def _fanned(wall_map: WallMap, wall: Wall, pieces: Array) -> bool:
             continue
         if abs(float(wall.normal @ other.normal)) < cos_max or not other.confirmed(cfg):
             continue
-        if 2 * other.depth_obs <= other.n_obs:
-            continue
         theirs = other.segments()
         tb = wall.along(theirs.reshape(-1, 2))
         low, high = max(ta.min(), tb.min()), min(ta.max(), tb.max())
-        if high - low <= cfg.fan_overlap:
+        short = scanned and high - low < cfg.fan_share * (ta.max() - ta.min())
+        if high - low <= cfg.fan_overlap or short:
             continue
         middle = wall.on_line(np.array([0.5 * (low + high)]))[0]
         if abs(float(other.normal @ (middle - other.foot))) <= cfg.fan_offset:

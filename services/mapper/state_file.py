@@ -34,18 +34,21 @@ def to_json(
     runs: Iterable[Progress] = (),
     slam: dict[str, Any] | None = None,
     config: dict[str, Any] | None = None,
+    poses: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything needed to carry on where the map stopped.
 
     ``runs`` are the players' runs as far as this map has taken them: a mapper restarted on the
     file acknowledges them from there, and the players send it the rest again. ``slam``: the
-    pose correction's state (``PoseCorrector.to_json``) under ``--slam``. ``config``: the
+    pose correction's state (``PoseCorrector.to_json``) under ``--slam``. ``poses``: what the
+    pose judge found of its source (``PoseJudge.to_json``). ``config``: the
     configuration the map was made with (plain values, as ``wallmap config`` prints it); kept
     for people and scripts, not read back.
     """
     return {
         "config": config,
         "slam": slam,
+        "poses": poses,
         "v": STATE_VERSION,
         "runs": [[r.run, r.processed, r.integrated, r.dropped] for r in runs],
         "next_id": wall_map.next_id,
@@ -138,19 +141,22 @@ def load_runs(path: Path) -> list[Progress]:
         raise StateError(msg) from err
 
 
-def load_slam(path: Path) -> dict[str, Any] | None:
-    """The pose correction a state file records (None: none, or no file yet)."""
+def load_entry(path: Path, name: str) -> dict[str, Any] | None:
+    """An entry of a state file: ``slam`` (the pose correction) or ``poses`` (the pose judge).
+
+    None: no such entry, or no file yet.
+    """
     if not path.exists():
         return None
     try:
-        slam = json.loads(path.read_text(encoding="utf-8")).get("slam")
+        entry = json.loads(path.read_text(encoding="utf-8")).get(name)
     except (OSError, ValueError, AttributeError) as err:
         msg = f"state file {path} is unusable ({type(err).__name__}: {err}); move it away"
         raise StateError(msg) from err
-    if slam is not None and not isinstance(slam, dict):
-        msg = f"state file {path} has an unusable 'slam' entry; move it away"
+    if entry is not None and not isinstance(entry, dict):
+        msg = f"state file {path} has an unusable {name!r} entry; move it away"
         raise StateError(msg)
-    return slam
+    return entry
 
 
 def load(path: Path, config: MapperConfig) -> WallMap:

@@ -68,17 +68,28 @@ class WallMap:
         self.walls[wall.id] = wall
         self.index.file(wall.id, wall.ends)
 
-    def integrate(self, frame: Observations, pose: Pose) -> list[int]:
-        """Fold one frame's observations in; returns the wall id each observation went to."""
+    def integrate(self, frame: Observations, pose: Pose, *, start_walls: bool = True) -> list[int]:
+        """Fold one frame's observations in; returns the wall id each observation went to.
+
+        ``start_walls``: whether an observation no wall takes starts one (id -1 where not).
+        """
         pose_vec = pose.vector
         pose_cov = pose.cov if pose.cov is not None else self.config.pose_cov
         depth = frame.sensor == "depth"
         ids = [
-            self._integrate_one(obs, pose_vec, pose_cov, frame.stamp, depth=depth)
+            self._integrate_one(
+                obs, pose_vec, pose_cov, frame.stamp, depth=depth, start=start_walls
+            )
             for obs in frame.walls
         ]
         self.finish_frame(frame, pose)
         return ids
+
+    def skip_frame(self, frame: Observations) -> None:
+        """A frame taken and left out of the map (its pose refused): counted, nothing else."""
+        self.frames += 1
+        self.version += 1
+        self.stamp = frame.stamp if self.stamp is None else max(self.stamp, frame.stamp)
 
     def finish_frame(self, frame: Observations, pose: Pose) -> None:
         """After a frame's observations: what its rays saw through, the counters, a keyframe."""
@@ -122,10 +133,19 @@ class WallMap:
             self.trajectory.append((pose.stamp, pose.x, pose.y, pose.yaw))
 
     def _integrate_one(
-        self, obs: WallObservation, pose: Array, pose_cov: Array, stamp: float, *, depth: bool
+        self,
+        obs: WallObservation,
+        pose: Array,
+        pose_cov: Array,
+        stamp: float,
+        *,
+        depth: bool,
+        start: bool,
     ) -> int:
         best = self.match(obs, pose, pose_cov)
         if best is None:
+            if not start:
+                return -1
             s, p, anchor = ekf.initial_state(obs.closest, obs.cov, pose, pose_cov)
             return self.add_wall(obs, s, p, anchor, pose, stamp, depth=depth).id
         wall, innov = best

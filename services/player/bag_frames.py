@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.common import se2
 from wallmap.common.messages import Pose
 from wallmap.common.ros_poses import header_stamp
 from wallmap.common.scan_row import RowSelection
@@ -20,7 +21,7 @@ from wallmap.services.player.choices import Plan, SensorChoice, SurveyFrame, cho
 from wallmap.services.player.depth import depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError, Refusal, decided
 from wallmap.services.player.frames import ClosingSource, SensorFrame, hand_out
-from wallmap.services.player.laserscan import laserscan_to_xyz
+from wallmap.services.player.laserscan import beam_times, deskew, laserscan_to_xyz
 from wallmap.services.player.placement import SURVEY_FRAMES, Placement
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 
@@ -96,6 +97,12 @@ class BagFrames(ClosingSource):
         """The base frame's 6-DoF pose at a stamp, or None where the source does not cover it."""
         return self._plan.poses.at(stamp)
 
+    @property
+    def pose_stamps(self) -> np.ndarray | None:
+        """The pose topic's own stamps (None for tf and none): where its dropouts are."""
+        track = self._plan.poses.track
+        return None if track is None else track.stamps
+
     def _mount(self, frame_id: str, stamp: float) -> np.ndarray:
         """T_base_sensor for a sensor frame, deciding once per frame name how to obtain it.
 
@@ -151,8 +158,30 @@ class BagFrames(ClosingSource):
                 points = invalid_to_nan(points)
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
+            sweep = 0.0
+            if self.sensor_type == LASERSCAN:
+                points, sweep = self._deskewed(msg, stamp, points, mount)
             bag_time = (receive_ns - begin) * 1e-9
-            yield SensorFrame(stamp, frame_id, points, mount, bag_time, stacked), pose
+            yield SensorFrame(stamp, frame_id, points, mount, bag_time, stacked, sweep), pose
+
+    def _deskewed(
+        self, msg: Any, stamp: float, points: np.ndarray, mount: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """A scan deskewed with the poses where its beams are timed, and the sweep left over.
+
+        Returns the points and how long the sweep they were not deskewed over took (0 once
+        deskewed): a scan without beam times, or without poses, is widened by the mapper.
+        """
+        period = self.duration / max(self.frame_count - 1, 1)
+        timed, span = beam_times(msg, period)
+        first = self._planar(stamp) if timed else None
+        last = self._planar(stamp + span) if first is not None else None
+        if first is None or last is None:
+            return points, span
+        return deskew(points, mount, se2.between(first.vector, last.vector)), 0.0
+
+    def _planar(self, stamp: float) -> Pose | None:
+        return self.placement.place(self.pose_at(stamp), np.eye(4))[0]
 
     @property
     def frame_count(self) -> int:

@@ -7,6 +7,7 @@ levelled fixed frame), then plays its frames as planned (``bag_frames``).
 """
 
 from collections.abc import Iterable
+from dataclasses import replace
 from pathlib import Path
 
 from wallmap.common.ros_poses import DEFAULT_CHILD
@@ -24,7 +25,7 @@ from wallmap.services.player.choices import (
 from wallmap.services.player.errors import decided
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.placement import LevelMode, Placement
-from wallmap.services.player.pose_choice import pose_topics
+from wallmap.services.player.pose_choice import default_source, pose_topics
 from wallmap.services.player.pose_sources import (
     BAG_DEFAULT,
     PoseSourceSpec,
@@ -95,11 +96,14 @@ def _decide(
         PlayerError: The first choice refused, or a damaged chunk.
     """
     selected = decided(select_topics(bag.topics, topics, bag.path))
+    spec, note = default_source(spec, selected)
     contents = read_contents(bag, selected, pose_topics=pose_topics(spec, selected))
     sensor = decided(choose_sensor(contents, sensor_topic))
     track = None
     if spec.path is not None:  # a TUM file's poses describe the base frame
         track = load_tum(spec.path, child=normalize_frame(base_frame or DEFAULT_CHILD))
     plan = decided(plan_playback(contents, sensor, spec, base_frame=base_frame, track=track))
+    if note is not None:
+        plan = replace(plan, poses=replace(plan.poses, warnings=(note, *plan.poses.warnings)))
     frames = read_survey_frames(bag, sensor) if plan.surveys else []
     return decided(choose_placement(plan, frames, level, floor_z))

@@ -23,6 +23,8 @@ class SensorFrame:
         bag_time: When the bag received it, seconds from the bag's start (for playback).
         band: When ``points`` is the band's stack (``pick_points``), that band (m above the
             floor); None for whole clouds and single rows.
+        sweep: Seconds the frame's capture spans and was not deskewed over: a scanner's sweep
+            without beam times, or without poses to deskew it with (0: an instant).
     """
 
     stamp: float
@@ -31,6 +33,7 @@ class SensorFrame:
     T_base_sensor: np.ndarray
     bag_time: float = 0.0
     band: tuple[float, float] | None = None
+    sweep: float = 0.0
 
 
 def hand_out(

@@ -38,3 +38,41 @@ def laserscan_to_xyz(msg: Any) -> np.ndarray:
     ranges = np.where(valid, ranges, np.float32(np.nan))
     directions = _directions(float(msg.angle_min), float(msg.angle_increment), ranges.size)
     return (directions * ranges[:, np.newaxis])[np.newaxis]
+
+
+def beam_times(msg: Any, period: float) -> tuple[bool, float]:
+    """Whether a scan's beams are timed, and how long its sweep took (s) from its stamp.
+
+    ROS stamps a scan at its first beam, the next one ``time_increment`` later; a scanner that
+    leaves ``time_increment`` at 0 says nothing of its beams' times, and its sweep is taken to
+    last ``scan_time`` or, without that either, ``period`` (the time between scans).
+    """
+    count = len(msg.ranges)
+    timed = float(msg.time_increment) > 0.0 and count > 1
+    if timed:
+        return True, float(msg.time_increment) * (count - 1)
+    return False, float(msg.scan_time) if float(msg.scan_time) > 0.0 else period
+
+
+def deskew(points: np.ndarray, mount: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """A timed scan's points as if all were seen at its first beam.
+
+    Args:
+        points: (1, n, 3) float32 points in the scanner frame, beams in time order.
+        mount: T_base_sensor (4x4).
+        motion: The base frame's planar motion (x, y, yaw) from the first beam to the last,
+            in the first beam's base frame; taken as steady over the sweep.
+
+    Returns:
+        (1, n, 3) float32 points in the scanner frame.
+    """
+    n = points.shape[1]
+    share = np.linspace(0.0, 1.0, n)[:, None]
+    step = share * motion  # (n, 3): the base's pose at each beam, from the first
+    base = points[0].astype(np.float64) @ mount[:3, :3].T + mount[:3, 3]
+    c, s = np.cos(step[:, 2]), np.sin(step[:, 2])
+    x = c * base[:, 0] - s * base[:, 1] + step[:, 0]
+    y = s * base[:, 0] + c * base[:, 1] + step[:, 1]
+    moved = np.column_stack([x, y, base[:, 2]])
+    rotation, offset = mount[:3, :3], mount[:3, 3]
+    return ((moved - offset) @ rotation).astype(np.float32)[np.newaxis]

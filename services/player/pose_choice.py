@@ -13,9 +13,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from wallmap.common.messages import Pose
-from wallmap.common.ros_poses import DEFAULT_CHILD, pose_from_matrix
+from wallmap.common.ros_poses import DEFAULT_CHILD, ODOMETRY_TYPE, POSE_TYPES, pose_from_matrix
 from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
-from wallmap.services.player.bag_contents import BagContents
+from wallmap.services.player.bag_contents import TF_TOPICS, BagContents
 from wallmap.services.player.bag_file import Topic
 from wallmap.services.player.errors import Refusal
 from wallmap.services.player.pose_sources import PoseSourceSpec, PoseTrack, resolve_pose_topic
@@ -78,6 +78,29 @@ def pose_topics(spec: PoseSourceSpec, topics: Mapping[str, Topic]) -> list[str]:
         return []
     topic = resolve_pose_topic(spec, {name: t.msgtype for name, t in topics.items()})
     return [] if isinstance(topic, Refusal) else [topic]
+
+
+def default_source(
+    spec: PoseSourceSpec, topics: Mapping[str, Topic]
+) -> tuple[PoseSourceSpec, str | None]:
+    """The default ``tf`` in a bag without any tf: its one pose topic, else its one odometry.
+
+    A robot tracked by motion capture, or a localiser's bag, carries its poses on a topic and
+    no tf at all; the default then takes them rather than refusing the bag. A pose topic (a
+    tracker's, a localiser's) comes before an odometry one, which drifts. Returns the spec to
+    use and what the player says of it (None: the spec as given).
+    """
+    if spec.kind != "tf" or spec.named or any(n.lstrip("/") in TF_TOPICS for n in topics):
+        return spec, None
+    for kind, types in (("pose", POSE_TYPES), ("odom", (ODOMETRY_TYPE,))):
+        found = sorted(name for name, topic in topics.items() if topic.msgtype in types)
+        if len(found) == 1:
+            note = (
+                f"the bag has no tf: poses from its one {kind} topic {found[0]} "
+                f"(--pose-source {kind}:{found[0]})"
+            )
+            return PoseSourceSpec(kind, topic=found[0]), note
+    return spec, None
 
 
 def choose_poses(

@@ -28,7 +28,7 @@ from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import MessageError, decode, encode
 from wallmap.common.config_file import require
 from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_history_publisher
-from wallmap.common.messages import Frame, Pose, pack
+from wallmap.common.messages import Frame, pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -36,6 +36,7 @@ from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback
+from wallmap.services.player.pose_stream import POSE_PERIOD, stream_of
 from wallmap.services.player.sources import FrameSource, SourceOptions, open_source
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
@@ -215,7 +216,9 @@ class _Outlet:
         self._rate = min(rate * (1.0 if playback.fast else speed), MAX_RATE * 8)
         self._session, self._keys, self._history = session, keys, history
         self._frames: AdvancedPublisher | None = None
-        self._poses = declare_history_publisher(session, keys.pose, history.samples(self._rate))
+        pose_rate = self._rate + (1.0 if playback.fast else speed) / POSE_PERIOD
+        self._poses = declare_history_publisher(session, keys.pose, history.samples(pose_rate))
+        self._stream = stream_of(bag)
         self._progress = session.declare_publisher(keys.player_progress)
         self._run, self._sensor, self._playback = run_id, sensor, playback
         self.lossless = playback.fast  # only --fast waits for the pipeline
@@ -227,15 +230,18 @@ class _Outlet:
         }  # fmt: skip
         self._last_progress = 0.0
 
-    def send(self, frame: SensorFrame, pose: Pose | None) -> None:
-        """Publish one frame (and its pose), and say so at most every PROGRESS_PERIOD."""
-        if pose is not None:
+    def send(self, frame: SensorFrame) -> None:
+        """Publish one frame, and say so at most every PROGRESS_PERIOD.
+
+        The source's poses go first, up to a little past the frame (``pose_stream``).
+        """
+        for pose in self._stream.until(frame.stamp):
             self._poses.put(pack(pose))
             self.poses += 1
         message = pack(
             Frame(
                 self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-                frame.T_base_sensor, self._sensor, self.lossless, frame.band,
+                frame.T_base_sensor, self._sensor, self.lossless, frame.band, frame.sweep,
             )
         )  # fmt: skip
         if self._frames is None:
@@ -266,7 +272,7 @@ def _play_pass(
 ) -> float | None:
     """Publish the bag's frames from ``start`` (s) on; returns where to seek to, if asked."""
     end = None if player.duration is None else player.start + player.duration
-    for frame, pose in bag.frames(rows, start=start, stop=end):
+    for frame, _ in bag.frames(rows, start=start, stop=end):
         turn = playback.wait_turn(frame.bag_time, stop)
         if stop.is_set():
             return None
@@ -274,7 +280,7 @@ def _play_pass(
             return turn.seek
         if player.fast:
             acks.wait_until(outlet.published - player.window + 1, player.stall_timeout, stop)
-        outlet.send(frame, pose)
+        outlet.send(frame)
     return None
 
 

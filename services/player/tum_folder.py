@@ -159,6 +159,11 @@ class TumFolder(ClosingSource):
         """The camera's 6-DoF pose at a stamp, or None where the trajectory does not cover it."""
         return None if self._track is None else self._track.at(stamp, tolerance=POSE_TOLERANCE)
 
+    @property
+    def pose_stamps(self) -> np.ndarray | None:
+        """The trajectory's own stamps (None without one): where its dropouts are."""
+        return None if self._track is None else self._track.stamps
+
     def _points(self, index: int, rows: slice = slice(None)) -> np.ndarray:
         depth = read_depth_png(self.entries[index][1], self._scale)
         if depth.shape != self.size:

@@ -37,6 +37,7 @@ from wallmap.scene.floorplan import (
 )
 from wallmap.scene.handheld import Handheld, HandheldStyle, write_handheld_recording
 from wallmap.scene.kinds import SCENE_KINDS, SceneKind
+from wallmap.scene.pose_faults import Glitch, PoseFaults
 from wallmap.scene.render import (
     Camera,
     Scanner,
@@ -76,9 +77,11 @@ __all__ = [
     "Camera",
     "FloorPlan",
     "Furniture",
+    "Glitch",
     "Handheld",
     "HandheldStyle",
     "Layout",
+    "PoseFaults",
     "Scanner",
     "SceneInfo",
     "SceneKind",

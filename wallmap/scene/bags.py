@@ -34,6 +34,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.common import se2
 from wallmap.scene.floorplan import FloorPlan, generate_floorplan
+from wallmap.scene.pose_faults import PoseFaults
 from wallmap.scene.render import (
     Camera,
     Scanner,
@@ -43,7 +44,12 @@ from wallmap.scene.render import (
     scan_walls_seen,
     walls_seen,
 )
-from wallmap.scene.trajectory import Trajectory, drifting_odometry, generate_trajectory
+from wallmap.scene.trajectory import (
+    Trajectory,
+    drifting_odometry,
+    generate_trajectory,
+    write_tum,
+)
 
 BagFormat = Literal["ros1", "ros2-mcap", "ros2-sqlite3"]
 SensorKind = Literal["pointcloud", "depth16", "depth32", "laserscan"]
@@ -115,6 +121,11 @@ class SceneInfo:
 def stamp_to_ns(stamp: float) -> int:
     """Nanoseconds for a float stamp in seconds, as used for headers and bag times."""
     return round(stamp * 1e9)
+
+
+def tum_path_for(path: str | Path) -> Path:
+    """Where a scene with pose faults keeps its faulty poses as a TUM file."""
+    return Path(f"{path}.poses.tum")
 
 
 def truth_path_for(path: str | Path) -> Path:
@@ -443,6 +454,7 @@ def write_scene_bag(
     rate_hz: float = 15.0,
     compress: bool = False,
     odometry_drift: tuple[float, float] = (0.02, 1.0),
+    faults: PoseFaults | None = None,
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
@@ -474,6 +486,11 @@ def write_scene_bag(
         compress: LZ4 chunk compression (ROS 1 only), for bags that ship in a repository.
         odometry_drift: How /odom drifts: its position error per metre (0.02 = 2 %) and its
             heading error in degrees per metre (``drifting_odometry``).
+        faults: How every pose source of the bag errs (``pose_faults``): tf ``map -> odom`` is
+            then written at every odom -> base_link stamp so that ``map -> base_link`` is the
+            faulty pose, /odom, /ground_truth and /amcl_pose carry the faults too, and the
+            faulty poses are also written as a TUM file, ``<path>.poses.tum``. The truth file
+            keeps the true trajectory.
 
     Returns:
         What was written, including the per-wall seen counts.
@@ -498,6 +515,11 @@ def write_scene_bag(
     odom = drifting_odometry(fine, odom_seed, drift_xy=odometry_drift[0],
                              drift_yaw_deg=odometry_drift[1])  # fmt: skip
     truth = fine.sliced(slice(None, None, 2))
+    posed = fine  # what the pose sources say: the truth, or the truth as a faulty source has it
+    if faults is not None and faults.any:
+        posed, odom = faults.apply(fine), faults.apply(odom)
+        write_tum(posed, tum_path_for(path))
+    every_map_odom = 1 if posed is not fine else _MAP_ODOM_EVERY
     twist = _body_twist(odom)
     stamps_ns = [stamp_to_ns(s) for s in fine.stamps]
     rng = np.random.default_rng(noise_seed)
@@ -525,8 +547,8 @@ def write_scene_bag(
         sink.write(tf_static, stamps_ns[0], static)
         for k, stamp_ns in enumerate(stamps_ns):
             odom_pose = se2.matrix(odom.pose_at(k))
-            if k % _MAP_ODOM_EVERY == 0 or k == len(stamps_ns) - 1:
-                map_odom = se2.matrix(fine.pose_at(k)) @ np.linalg.inv(odom_pose)
+            if k % every_map_odom == 0 or k == len(stamps_ns) - 1:
+                map_odom = se2.matrix(posed.pose_at(k)) @ np.linalg.inv(odom_pose)
                 msg = _planar_transform(sink, stamp_ns, MAP_FRAME, ODOM_FRAME, map_odom)
                 sink.write(tf, stamp_ns, tf_message(sink, msg))
             msg = _planar_transform(sink, stamp_ns, ODOM_FRAME, BASE_FRAME, odom_pose)
@@ -534,17 +556,17 @@ def write_scene_bag(
             if k % 2:
                 continue
 
-            pose = fine.pose_at(k)
+            pose, given = fine.pose_at(k), posed.pose_at(k)
             sink.write(odom_conn, stamp_ns, _odometry(sink, stamp_ns, odom.pose_at(k), twist[k]))
             sink.write(
                 truth_conn,
                 stamp_ns,
                 sink.types["geometry_msgs/msg/PoseStamped"](
                     header=sink.header(GROUND_TRUTH_TOPIC, stamp_ns, MAP_FRAME),
-                    pose=_pose(sink, *pose),
+                    pose=_pose(sink, *given),
                 ),
             )
-            sink.write(amcl_conn, stamp_ns, _amcl_pose(sink, stamp_ns, pose))
+            sink.write(amcl_conn, stamp_ns, _amcl_pose(sink, stamp_ns, given))
             if laser:
                 ranges, hit_wall = render_scan(plan, *pose, scanner, rng)
                 seen = scan_walls_seen(hit_wall, ranges)
