@@ -89,9 +89,9 @@ def _smoothed(stamps: Array, yaw: Array) -> tuple[Array, Array]:
     if len(grid) < 3:
         return stamps, yaw
     resampled = np.interp(grid, stamps, yaw)
-    width = max(1, round(SMOOTH / 0.01))
-    kernel = np.ones(width) / width
-    padded = np.pad(resampled, (width // 2, width - 1 - width // 2), mode="edge")
+    half = round(SMOOTH / 0.02)  # an odd width, centred: an even one would shift by 5 ms
+    kernel = np.ones(2 * half + 1) / (2 * half + 1)
+    padded = np.pad(resampled, (half, half), mode="edge")
     return grid, np.convolve(padded, kernel, mode="valid")
 
 

@@ -6,8 +6,8 @@ If the source is as good as assumed, ``d^2 / C`` is 1 on average; larger, the so
 assumed (the prior too narrow: good observations would be refused), smaller, better (the prior too
 wide: the walls' own noise would be taken for the source's). Scaling the assumed noise by that
 ratio, a little at a time, is covariance matching (Mehra 1972; Myers and Tapley 1976): it settles
-where the prior is what the source is worth. Medians, not means, so that a glitch the walls caught
-does not teach the source is worse than it is.
+where the prior is what the source is worth. The ratios are clipped, so that a glitch the walls
+caught does not teach the source is worse than it is.
 """
 
 from __future__ import annotations
@@ -20,8 +20,7 @@ import numpy as np
 
 from wallmap.common.se2 import Array
 
-CHI2_1DOF_MEDIAN = 0.454936  # the median of a chi-square with one degree of freedom
-CHI2_2DOF_MEDIAN = 1.386294  # ...and with two
+OUTLIER = 9.0  # a correction's squared ratio to its predicted variance counts at most this
 
 
 @dataclass(frozen=True)
@@ -92,7 +91,7 @@ class TrustLearner:
         xy = float(correction[0] ** 2 + correction[1] ** 2) / float(variance[0] + variance[1])
         yaw = float(correction[2] ** 2) / float(variance[2])
         normalised = np.asarray(correction, float) / np.sqrt(variance)
-        self._frames.append((xy * 2.0 / CHI2_2DOF_MEDIAN, yaw / CHI2_1DOF_MEDIAN, normalised))
+        self._frames.append((xy, yaw, normalised))
         self.seen += 1
         if len(self._frames) >= self.every:
             self._adjust()
@@ -105,8 +104,10 @@ class TrustLearner:
         power = [(u[:, :2] ** 2).sum(axis=1), u[:, 2] ** 2]
         noise, drift = [], []
         for axis in (0, 1):
-            # A variance ratio, so a standard deviation's by its square root; then halfway.
-            step = float(np.median(ratios[:, axis])) ** 0.25
+            # The ratios' mean is 1 when the model is right; large ones (a glitch the walls
+            # caught) are clipped at 3 sigma. A variance ratio, so a standard deviation's by
+            # its square root; then halfway.
+            step = float(np.mean(np.minimum(ratios[:, axis], OUTLIER))) ** 0.25
             low = self.floor.noise[axis] / self.assumed.noise[axis]
             noise.append(float(np.clip(self.factor[axis] * step, low, self.limit)))
             correlation = float(np.mean(lag[axis])) / max(float(np.mean(power[axis])), 1e-18)
@@ -151,10 +152,10 @@ class NoiseScale:
 class JumpDetector:
     """Whether a pose source jumped: moved between two frames as no robot moves.
 
-    Each frame's pose is predicted from the last one and its velocity; the deviation is
-    compared with the deviations seen lately (their median absolute deviation), so a noisy
-    source's jitter is not a jump and a precise source's small slip is. A jump is where a
-    tracker swapped to a wrong solution, or back; between two jumps it may be wrong
+    Each frame's pose is predicted from the two before it (at the velocity between them); the
+    deviation is compared with the deviations seen lately (their median absolute deviation),
+    so a noisy source's jitter is not a jump and a precise source's small slip is. A jump is
+    where a tracker swapped to a wrong solution, or back; between two jumps it may be wrong
     throughout, which only the walls can tell.
 
     Args:
@@ -170,16 +171,21 @@ class JumpDetector:
         window: int = 200,
     ) -> None:
         self.factor, self.least = factor, least
-        self._last: tuple[float, Array, Array] | None = None
+        self._last: list[tuple[float, Array]] = []  # the two frames before, oldest first
         self._deviations: collections.deque[tuple[float, float]] = collections.deque(maxlen=window)
 
-    def add(self, stamp: float, pose: Array, velocity: Array) -> bool:
-        """The source's pose (x, y, yaw) and velocity at a frame; whether it jumped there."""
-        last, self._last = self._last, (stamp, np.asarray(pose, float), np.asarray(velocity, float))
-        if last is None or not 0.0 < stamp - last[0] < 1.0:
+    def add(self, stamp: float, pose: Array) -> bool:
+        """The source's pose (x, y, yaw) at a frame; whether it jumped there."""
+        pose = np.asarray(pose, float)
+        history, self._last = self._last, [*self._last[-1:], (stamp, pose)]
+        if len(history) < 2 or not 0.0 < stamp - history[1][0] < 1.0:
             return False
-        dt = stamp - last[0]
-        predicted = last[1] + last[2] * dt
+        (t0, p0), (t1, p1) = history
+        if not 0.0 < t1 - t0 < 1.0:
+            return False
+        step = p1 - p0
+        step[2] = math.remainder(step[2], 2 * math.pi)
+        predicted = p1 + step * (stamp - t1) / (t1 - t0)
         xy = math.hypot(pose[0] - predicted[0], pose[1] - predicted[1])
         yaw = abs(math.remainder(pose[2] - predicted[2], 2 * math.pi))
         jumped = False

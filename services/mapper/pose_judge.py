@@ -174,7 +174,7 @@ class PoseJudge:
         """
         self._learn_latency(frame, poses)
         self._predict(frame.stamp)
-        if self.jumps.add(frame.stamp, source.pose.vector, source.velocity):
+        if self.jumps.add(frame.stamp, source.pose.vector):
             self.suspect = True  # until the walls agree with the source again
         mean, cov = self._prior(source)
         x0, jx = pose_fit.frame_pose(mean, source.pose.vector)

@@ -1,0 +1,173 @@
+"""Poses as real sources give them (late, noisy, glitching), judged against the walls.
+
+Generated scenes whose every pose source carries the faults (``wallmap.scene.PoseFaults``),
+mapped in one process as the services map them (``wallmap.offline``), scored against the
+scene's truth.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wallmap.common import se2
+from wallmap.common.messages import Observations, Pose, WallObservation
+from wallmap.config import configured
+from wallmap.evaluation import evaluate_map
+from wallmap.offline import run_bag, walls
+from wallmap.scene import Glitch, PoseFaults
+from wallmap.scene.bags import tum_path_for
+from wallmap.services.mapper.pose_buffer import SourcePose
+from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
+from wallmap.services.mapper.wall_map import WallMap
+
+GLITCH = Glitch(start=15.0, duration=3.0, yaw_deg=12.0, offset_m=0.1)
+FAULTS = PoseFaults(latency=0.08, heading_sd_deg=0.5, glitches=(GLITCH,), seed=3)
+
+
+@pytest.fixture(scope="module")
+def faulty(scene_bags):
+    """A depth camera's scene, its poses 80 ms late, 0.5 deg noisy, 3 s 12 deg and 10 cm off."""
+    return scene_bags("faulty-depth.bag", seed=3, n_frames=600, fmt="ros1", sensor="depth16",
+                      faults=FAULTS)  # fmt: skip
+
+
+def _spec(info, source: str) -> str:
+    return f"tum:{tum_path_for(info.path)}" if source == "tum" else source
+
+
+@pytest.mark.parametrize("source", ["tf", "pose:/ground_truth", "pose:/amcl_pose", "tum"])
+def test_late_noisy_glitching_poses_map_one_wall_a_surface(faulty, source: str) -> None:
+    pipeline = run_bag(
+        faulty.path, configured(f"player.source.pose_source={_spec(faulty, source)}")
+    )
+    score = evaluate_map(walls(pipeline.map, 3), faulty.plan, faulty.seen_counts)
+    found = pipeline.mapping.judge.summary()
+    print(f"\n{source}: {score.summary()}; {found}")
+    assert pipeline.map.frames == faulty.n_frames  # every frame taken
+    assert score.precision >= 0.98
+    assert score.recall >= 0.95
+    assert score.duplicates == 0
+    assert score.median_offset_m <= 0.015
+    assert found["latency_s"] == pytest.approx(FAULTS.latency, abs=0.01)
+    assert found["frames_recovered"] > 0  # the glitch was seen and placed by the walls
+
+
+def test_taken_as_they_come_the_same_poses_do_not(faulty) -> None:
+    """The bar above is the judge's: without it, the same bag maps worse (``--trust-poses``)."""
+    spec = _spec(faulty, "tum")
+    judged = run_bag(faulty.path, configured(f"player.source.pose_source={spec}"))
+    trusted = run_bag(
+        faulty.path, configured(f"player.source.pose_source={spec}", "mapper.judge.enabled=false")
+    )
+    assert trusted.mapping.judge is None
+    as_given = evaluate_map(walls(trusted.map, 3), faulty.plan, faulty.seen_counts)
+    judged_score = evaluate_map(walls(judged.map, 3), faulty.plan, faulty.seen_counts)
+    print(f"\ntrusted: {as_given.summary()}\njudged: {judged_score.summary()}")
+    assert as_given.precision < judged_score.precision - 0.1
+    assert as_given.median_offset_m > 3 * judged_score.median_offset_m
+
+
+@pytest.mark.parametrize("latency", [0.03, 0.15])
+def test_the_latency_is_estimated_within_10_ms(scene_bags, latency: float) -> None:
+    faults = PoseFaults(latency=latency, heading_sd_deg=0.3, seed=5)
+    info = scene_bags(f"late-{latency}.bag", seed=5, n_frames=450, fmt="ros1",
+                      sensor="laserscan", faults=faults)  # fmt: skip
+    pipeline = run_bag(info.path, configured(f"player.source.pose_source={_spec(info, 'tum')}"))
+    found = pipeline.mapping.judge.summary()
+    score = evaluate_map(walls(pipeline.map, 3), info.plan, info.seen_counts)
+    print(f"\n{latency}: {score.summary()}; {found}")
+    assert found["settled"]
+    assert found["latency_s"] == pytest.approx(latency, abs=0.01)
+    assert score.precision >= 0.98
+    assert score.recall >= 0.95
+    assert score.duplicates == 0
+
+
+def test_a_given_latency_is_used_not_estimated(faulty) -> None:
+    spec = _spec(faulty, "tum")
+    pipeline = run_bag(
+        faulty.path,
+        configured(f"player.source.pose_source={spec}", "mapper.judge.latency=0.08"),
+        frames=100,
+    )
+    found = pipeline.mapping.judge.summary()
+    assert found["latency_fixed"]
+    assert found["latency_s"] == 0.08
+    assert pipeline.mapping.source_stamp(100.0) == pytest.approx(100.08)
+
+
+# --- one judge, one room: a glitch placed, a contradiction refused --------------------------
+
+ROOM = [((-3.0, -2.0), (3.0, -2.0)), ((3.0, -2.0), (3.0, 2.0)), ((3.0, 2.0), (-3.0, 2.0)),
+        ((-3.0, 2.0), (-3.0, -2.0))]  # fmt: skip
+
+
+def _seen(pose: np.ndarray, walls_seen=ROOM) -> list[WallObservation]:
+    """Every wall of the room seen from ``pose``, exactly, as the detector reports it."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s], [s, c]])
+    out = []
+    for a, b in walls_seen:
+        p0, p1 = np.array(a), np.array(b)
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        foot = p0 + ((np.array([x, y]) - p0) @ d) * d
+        ends = (np.array([p0, p1]) - [x, y]) @ rot
+        out.append(WallObservation(rot.T @ (foot - [x, y]), np.eye(2) * 1e-5, ends[0], ends[1],
+                                   200, 0.003))  # fmt: skip
+    return out
+
+
+def _frame(stamp: float, pose: np.ndarray, walls_seen=ROOM) -> Observations:
+    return Observations("r", int(stamp * 10), stamp, "base_link", _seen(pose, walls_seen),
+                        sensor="scan")  # fmt: skip
+
+
+def _source(stamp: float, pose: np.ndarray) -> SourcePose:
+    return SourcePose(Pose(stamp, *map(float, pose)), np.zeros(3), 0.0)
+
+
+def _mapped_room() -> tuple[PoseJudge, WallMap, list[np.ndarray]]:
+    """A judge and the room mapped by it from exact poses, turning on the spot."""
+    judge, wall_map = PoseJudge(JudgeConfig(latency=0.0)), WallMap()
+    poses = [np.array([0.2 * math.cos(k / 5), 0.3 * math.sin(k / 7), 0.1 * k]) for k in range(60)]
+    for k, pose in enumerate(poses):
+        verdict = judge.judge(_frame(k * 0.1, pose), _source(k * 0.1, pose), wall_map, None)
+        wall_map.integrate(_frame(k * 0.1, pose), verdict.pose)
+    return judge, wall_map, poses
+
+
+def test_a_tracker_that_jumps_15_degrees_is_placed_where_the_walls_say() -> None:
+    judge, wall_map, poses = _mapped_room()
+    true = np.array([0.1, -0.1, poses[-1][2] + 0.1])
+    wrong = true + np.array([0.15, -0.1, math.radians(15.0)])
+    verdict = judge.judge(_frame(6.1, true), _source(6.1, wrong), wall_map, None)
+    assert verdict.kind == "recovered"
+    assert not verdict.start_walls  # a pose the source got wrong starts no wall
+    assert verdict.pose is not None
+    error = verdict.pose.vector - true
+    error[2] = se2.wrap(float(error[2]))
+    np.testing.assert_allclose(error, 0.0, atol=2e-3)
+    assert judge.counts.recovered == 1
+
+
+def test_walls_that_say_nothing_clear_refuse_the_frame() -> None:
+    """A jump, and one wall in view: where along it the frame was, the walls cannot say."""
+    judge, wall_map, poses = _mapped_room()
+    true = np.array([0.0, 0.0, poses[-1][2] + 0.1])
+    wrong = true + np.array([0.3, 0.2, math.radians(15.0)])
+    verdict = judge.judge(_frame(6.1, true, ROOM[:1]), _source(6.1, wrong), wall_map, None)
+    assert verdict.kind == "refused"
+    assert verdict.pose is None
+    assert judge.counts.refused == 1
+
+
+def test_the_judge_goes_on_from_its_state_file_entry() -> None:
+    judge, _, _ = _mapped_room()
+    again = PoseJudge.from_json(judge.to_json(), judge.config)
+    assert again.summary() == judge.summary()
+    with pytest.raises(ValueError, match="finite"):
+        PoseJudge.from_json({**judge.to_json(), "latency": float("nan")}, judge.config)
