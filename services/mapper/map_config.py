@@ -70,6 +70,9 @@ class MapperConfig:
             ``view_angle`` since the last one): one glimpse, however long, is not a wall.
         keyframe_distance: the trajectory kept with the map has a pose every this far (m)...
         keyframe_angle: ...or every this much turn (rad); also the distinct-view thresholds.
+        keyframe_error: ...and wherever the poses used between two keyframes stray from the
+            line between them by more than this (m, rad): interpolated, the trajectory places
+            every frame within it (a judged pose is corrected frame by frame).
     """
 
     gate: float = ekf.CHI2_2DOF_999
@@ -97,6 +100,7 @@ class MapperConfig:
     confirm_views: int = 2
     keyframe_distance: float = 0.1
     keyframe_angle: float = np.radians(5.0)
+    keyframe_error: tuple[float, float] = (0.01, float(np.radians(0.2)))
 
     @property
     def pose_cov(self) -> Array:

@@ -226,7 +226,7 @@ def reply(wall_map: WallMap, query: MapQuery | None = None) -> MapReply:
         stamp=wall_map.stamp,
         walls=tuple(record(wall_map.walls[i], segments[i], tentative=not cache[i]) for i in chosen),
         merges=tuple(wall_map.merges),
-        trajectory=tuple(wall_map.trajectory) if query.trajectory else None,
+        trajectory=tuple(wall_map.path()) if query.trajectory else None,
     )
 
 

@@ -55,7 +55,7 @@ def to_json(
         "frames": wall_map.frames,
         "observations": wall_map.observations,
         "stamp": wall_map.stamp,
-        "trajectory": wall_map.trajectory,
+        "trajectory": wall_map.path(),
         "merges": wall_map.merges,
         "walls": [
             {

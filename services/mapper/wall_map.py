@@ -15,7 +15,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common import ekf, se2, wall_model
+from wallmap.common import ekf, keyframes, se2, wall_model
+from wallmap.common.keyframes import Stamped
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.map_config import MapperConfig
@@ -31,6 +32,7 @@ THROUGH_NOISE = 3e-3  # m per m^2 of range: 3 sigma of a depth camera's range no
 THROUGH_NEAR = 0.3  # m from the sensor: nearer crossings are not counted
 CROSSING_ANGLE = math.radians(30.0)  # a wall at least this far from parallel may cross a gap
 CROSSING_REACH = 0.2  # m it must reach past the line on both sides: a T only meets it
+KEYFRAME_GAP = 100  # frames without a keyframe at most (a robot standing still)
 
 
 def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
@@ -56,7 +58,8 @@ class WallMap:
         self.frames = 0
         self.observations = 0
         self.stamp: float | None = None
-        self.trajectory: list[tuple[float, float, float, float]] = []  # stamp, x, y, yaw
+        self.trajectory: list[Stamped] = []  # keyframes: stamp, x, y, yaw
+        self._since_keyframe: list[Stamped] = []  # the poses used since the last keyframe
         self.merges: list[tuple[int, int, float]] = []  # (merged id, surviving id, stamp)
         self.changed: set[int] = set()  # since the last take_changes()
         self.removed: set[int] = set()
@@ -126,11 +129,33 @@ class WallMap:
             ):
                 self.changed.add(wall.id)
 
+    def path(self) -> list[Stamped]:
+        """The keyframes, then the newest pose used: what the map reply's trajectory is."""
+        return self.trajectory + self._since_keyframe[-1:]
+
     def _keep_keyframe(self, pose: Pose) -> None:
-        last = np.array(self.trajectory[-1][1:]) if self.trajectory else None
+        """A keyframe every step of travel or turn, and where interpolation would misplace a frame.
+
+        Judged poses are corrected frame by frame (``common.keyframes``).
+        """
+        new: Stamped = (pose.stamp, pose.x, pose.y, pose.yaw)
         cfg = self.config
-        if last is None or _moved(last, pose.vector, cfg.keyframe_distance, cfg.keyframe_angle):
-            self.trajectory.append((pose.stamp, pose.x, pose.y, pose.yaw))
+        pending = self._since_keyframe
+        if not self.trajectory or new[0] <= self.trajectory[-1][0]:
+            self.trajectory.append(new)  # the first pose, or a new run
+            pending.clear()
+            return
+        if len(pending) >= KEYFRAME_GAP or not keyframes.interpolates(
+            self.trajectory[-1], new, pending, *cfg.keyframe_error
+        ):
+            self.trajectory.append(pending[-1])  # the last pose the straight line still held
+            pending.clear()
+        last = np.array(self.trajectory[-1][1:])
+        if _moved(last, pose.vector, cfg.keyframe_distance, cfg.keyframe_angle):
+            self.trajectory.append(new)
+            pending.clear()
+        else:
+            pending.append(new)
 
     def _integrate_one(
         self,

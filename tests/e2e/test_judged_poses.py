@@ -49,12 +49,11 @@ def _explained(reply: dict, bag: Path) -> float:
     """The share of the scans' points within 5 cm of a served wall, placed with the poses the
     mapper used (its trajectory, interpolated at each scan)."""
     walls = [MappedWall.from_reply(w) for w in reply["walls"]]
-    trajectory = np.array(reply["trajectory"])
-    stamps, yaw = trajectory[:, 0], np.unwrap(trajectory[:, 3])
+    stamps, x, y, yaw = np.array(reply["trajectory"]).T
+    yaw = np.unwrap(yaw)
     distances = []
     for stamp, xy in scan_rows(bag):
-        pose = (np.interp(stamp, stamps, trajectory[:, 1]),
-                np.interp(stamp, stamps, trajectory[:, 2]), np.interp(stamp, stamps, yaw))  # fmt: skip
+        pose = [np.interp(stamp, stamps, value) for value in (x, y, yaw)]
         distances.append(distance_to_walls(transform_points(xy, pose), walls))
     return float(np.mean(np.concatenate(distances) <= 0.05))
 

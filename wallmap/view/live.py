@@ -88,9 +88,16 @@ class LiveMap:
             return True
 
     def add_pose(self, pose: Pose) -> None:
-        """Keep a pose; poses arrive in stamp order but a late one is put in its place."""
+        """Keep a pose in its place by stamp; when full, the oldest makes room.
+
+        A player sends each frame's own pose after the poses ahead of it: late ones are common.
+        """
         with self._lock:
             if self._poses and pose.stamp < self._poses[-1].stamp:
+                if pose.stamp < self._poses[0].stamp:
+                    return  # older than all kept: the oldest would be dropped for it anyway
+                if len(self._poses) == self._poses.maxlen:
+                    self._poses.popleft()
                 stamps = [p.stamp for p in self._poses]
                 self._poses.insert(bisect.bisect(stamps, pose.stamp), pose)
             else:

@@ -425,3 +425,22 @@ def test_a_wall_beside_a_better_seen_neighbour_at_a_shallow_corner_is_no_shadow(
     integrate_views(wall_map, [(turned(12.5, -0.5), turned(12.5, 4.0))], 30)
     integrate_views(wall_map, [((-1.9, 2.0), (0.5, 2.0))], 6, first=40)
     assert len(reply(wall_map)["walls"]) == 2
+
+
+def test_the_trajectory_interpolates_to_every_pose_used_however_they_jitter():
+    """Judged poses are corrected frame by frame: keyframes a step of travel apart would lose
+    that, so a frame the straight line between keyframes misplaces is kept too."""
+    wall_map = WallMap()
+    rng = np.random.default_rng(3)
+    used = []
+    for k in range(200):
+        jitter = rng.normal(0.0, np.radians(1.0)) if 50 <= k < 100 else 0.0
+        pose = Pose(k * 0.1, 0.01 * k, 0.0, 0.002 * k + jitter)
+        used.append(pose)
+        wall_map.integrate(Observations("test", k, pose.stamp, "base_link", ()), pose)
+    path = np.array(wall_map.path())
+    assert path[-1, 0] == used[-1].stamp, "the newest pose ends it"
+    smooth = np.sum((path[:, 0] < 5.0) | (path[:, 0] >= 10.0))
+    assert smooth < 40, "smooth motion: a keyframe a step of travel or turn"
+    yaw = np.interp([p.stamp for p in used], path[:, 0], path[:, 3])
+    assert np.abs(yaw - [p.yaw for p in used]).max() <= np.radians(0.2) + 1e-9
