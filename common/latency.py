@@ -18,6 +18,7 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -120,6 +121,22 @@ class LatencyEstimator:
         elif self._last is not None and stamp < self._last[0]:
             self._turns.clear()  # time went back: another run
         self._last = (stamp, closest)
+
+    def to_json(self) -> dict[str, Any]:
+        """The turns kept and the last frame's lines (a state file's)."""
+        last = None if self._last is None else [self._last[0], self._last[1].tolist()]
+        return {"turns": [list(t) for t in self._turns], "last": last}
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
+        turns = np.asarray(data["turns"], dtype=float).reshape(-1, 3)
+        last = data["last"]
+        closest = None if last is None else np.asarray(last[1], dtype=float).reshape(-1, 2)
+        if not np.isfinite(turns).all() or (closest is not None and not np.isfinite(closest).all()):
+            raise ValueError("the latency's turns must be finite")
+        self._turns.clear()
+        self._turns.extend((a, b, c) for a, b, c in turns.tolist())
+        self._last = None if closest is None else (float(last[0]), closest)
 
     def __len__(self) -> int:
         return len(self._turns)

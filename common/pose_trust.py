@@ -15,6 +15,7 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -76,9 +77,21 @@ class TrustLearner:
         self.seen = 0
         self._frames: list[tuple[float, float, Array]] = []  # ratios and normalised corrections
 
-    def restore(self, noise: tuple[float, float], drift: tuple[float, float]) -> None:
-        """Go on from factors learnt before (a state file's)."""
-        self.factor, self.drift = noise, drift
+    def to_json(self) -> dict[str, Any]:
+        """All it has learnt and is learning from, as plain numbers (a state file's)."""
+        return {
+            "noise_factor": list(self.factor),
+            "drift_factor": list(self.drift),
+            "seen": self.seen,
+            "frames": [[a, b, n.tolist()] for a, b, n in self._frames],
+        }
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
+        self.factor = _finite_pair(data["noise_factor"])
+        self.drift = _finite_pair(data["drift_factor"])
+        self.seen = int(data["seen"])
+        self._frames = [(float(a), float(b), _finite(n, 3)) for a, b, n in data["frames"]]
         self._set_trust()
 
     def _set_trust(self) -> None:
@@ -139,6 +152,17 @@ class NoiseScale:
         self.scale = 1.0
         self._targets: collections.deque[float] = collections.deque(maxlen=window)
 
+    def to_json(self) -> dict[str, Any]:
+        """The factor and the frames it comes from (a state file's)."""
+        return {"scale": self.scale, "targets": list(self._targets)}
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
+        targets = _finite(data["targets"], None)
+        self.scale = float(_finite([data["scale"]], 1)[0])
+        self._targets.clear()
+        self._targets.extend(targets.tolist())
+
     def add(self, m2: Array) -> None:
         """A frame's distances, computed with the covariances scaled by ``scale``."""
         if len(m2) < 2:
@@ -174,6 +198,19 @@ class JumpDetector:
         self._last: list[tuple[float, Array]] = []  # the two frames before, oldest first
         self._deviations: collections.deque[tuple[float, float]] = collections.deque(maxlen=window)
 
+    def to_json(self) -> dict[str, Any]:
+        """The frames before and the deviations seen lately (a state file's)."""
+        return {
+            "last": [[t, p.tolist()] for t, p in self._last],
+            "deviations": [list(d) for d in self._deviations],
+        }
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
+        self._last = [(float(t), _finite(p, 3)) for t, p in data["last"]]
+        self._deviations.clear()
+        self._deviations.extend(_finite_pair(d) for d in data["deviations"])
+
     def add(self, stamp: float, pose: Array) -> bool:
         """The source's pose (x, y, yaw) at a frame; whether it jumped there."""
         pose = np.asarray(pose, float)
@@ -196,3 +233,16 @@ class JumpDetector:
         if not jumped:
             self._deviations.append((xy, yaw))
         return jumped
+
+
+def _finite(values: Any, size: int | None) -> Array:
+    """Numbers read back from a state file: finite, and ``size`` of them if given."""
+    array = np.asarray(values, dtype=float).reshape(-1)
+    if (size is not None and array.shape != (size,)) or not np.isfinite(array).all():
+        raise ValueError(f"expected {size or 'some'} finite numbers, got {values!r:.80}")
+    return array
+
+
+def _finite_pair(values: Any) -> tuple[float, float]:
+    a, b = _finite(values, 2).tolist()
+    return a, b

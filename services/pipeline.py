@@ -65,8 +65,10 @@ class Mapping:
         self.judge = judged
         self.latency = judge.latency or 0.0  # of poses taken as they come
         self.lookahead = judge.lookahead()
-        # The first frames' observations, kept until the latency is known (PoseJudge.settled).
-        self._early: list[Observations] | None = [] if judged and not judged.settled else None
+        # The first frames' observations, kept until the latency is known (PoseJudge.settled);
+        # never for a map restored from a state file: a remap would lose its walls.
+        remappable = judged is not None and not judged.settled and not self.map.walls
+        self._early: list[Observations] | None = [] if remappable else None
 
     def source_stamp(self, stamp: float) -> float:
         """The stamp of the source's pose that describes the instant ``stamp``."""

@@ -371,15 +371,27 @@ class PoseJudge:
         }
 
     def to_json(self) -> dict[str, Any]:
-        """What a state file keeps, so a restarted mapper knows its source as this one did."""
+        """Everything it carries from frame to frame, for a state file.
+
+        A restarted mapper then goes on exactly as this one would have: the frames it takes
+        again from the history come out the same.
+        """
+        alternative = self._alternative
+        if alternative is not None:
+            alternative = (alternative[0].tolist(), *alternative[1:])
         return {
             "offset": self.offset.tolist(),
             "cov": self.cov.tolist(),
             "latency": self.latency,
             "latency_sd": self.latency_sd,
-            "noise_factor": list(self.learner.factor),
-            "drift_factor": list(self.learner.drift),
-            "noise_scale": self.noise.scale,
+            "settled": self.settled,
+            "stamp": self.stamp,
+            "suspect": self.suspect,
+            "alternative": alternative,
+            "learner": self.learner.to_json(),
+            "noise": self.noise.to_json(),
+            "turns": self.turns.to_json(),
+            "jumps": self.jumps.to_json(),
             "counts": vars(self.counts).copy(),
         }
 
@@ -389,7 +401,7 @@ class PoseJudge:
         judge = cls(config)
         offset = np.asarray(data["offset"], dtype=float)
         cov = np.asarray(data["cov"], dtype=float)
-        numbers = np.array([data["latency"], data["latency_sd"], data["noise_scale"]], float)
+        numbers = np.array([data["latency"], data["latency_sd"]], float)
         if offset.shape != (3,) or cov.shape != (3, 3):
             raise ValueError("the offset must hold 3 numbers, its covariance 3x3")
         if not all(np.isfinite(a).all() for a in (offset, cov, numbers)):
@@ -397,17 +409,18 @@ class PoseJudge:
         judge.offset, judge.cov = offset, cov
         if config.latency is None:
             judge.latency, judge.latency_sd = float(numbers[0]), float(numbers[1])
-        judge.noise.scale = float(numbers[2])
-        judge.learner.restore(_pair(data["noise_factor"]), _pair(data["drift_factor"]))
+            judge.settled = bool(data["settled"])
+            judge.turns.restore(data["turns"])
+        judge.stamp = None if data["stamp"] is None else float(data["stamp"])
+        judge.suspect = bool(data["suspect"])
+        alternative = data["alternative"]
+        if alternative is not None:
+            judge._alternative = (np.asarray(alternative[0], float), *map(float, alternative[1:]))
+        judge.learner.restore(data["learner"])
+        judge.noise.restore(data["noise"])
+        judge.jumps.restore(data["jumps"])
         judge.counts = _Counts(**{k: int(v) for k, v in dict(data["counts"]).items()})
         return judge
-
-
-def _pair(value: Any) -> tuple[float, float]:
-    a, b = (float(v) for v in value)
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise ValueError("the learnt noise must be finite")
-    return a, b
 
 
 def _close(a: Array, b: Array) -> bool:

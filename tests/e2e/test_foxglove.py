@@ -134,7 +134,7 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
     walls = stack.query("--tentative")["walls"]  # the map updates carry the tentative walls too
 
     poses = int(re.search(r"and (\d+) poses", played.stdout)[1])
-    assert poses == 120
+    assert poses >= 120, "each frame's pose, and the stream ahead of the frames"
     assert stdout.startswith(f"wrote {out}: ")
     assert f"/wallmap/pose {poses}" in stdout
 

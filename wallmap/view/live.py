@@ -27,6 +27,27 @@ def _pose_json(pose: Pose) -> dict[str, float]:
     return {"stamp": pose.stamp, "x": pose.x, "y": pose.y, "yaw": pose.yaw}
 
 
+def _pose_at(poses: deque[Pose], stamp: float) -> Pose | None:
+    """The pose at ``stamp`` between the two kept around it, else the nearest kept one."""
+    if not poses:
+        return None
+    stamps = [p.stamp for p in poses]
+    i = bisect.bisect_left(stamps, stamp)
+    if i == len(poses) or (i == 0 and stamps[0] != stamp):
+        return poses[min(i, len(poses) - 1)]
+    after = poses[i]
+    if after.stamp == stamp:
+        return after
+    before = poses[i - 1]
+    share = (stamp - before.stamp) / (after.stamp - before.stamp)
+    return Pose(
+        stamp,
+        before.x + share * (after.x - before.x),
+        before.y + share * (after.y - before.y),
+        se2.wrap(before.yaw + share * se2.wrap(after.yaw - before.yaw)),
+    )
+
+
 class LiveMap:
     """The map, versioned per wall, plus the newest pose and observations. Thread-safe."""
 
@@ -166,13 +187,14 @@ class LiveMap:
         ``recent`` is the path of the kept poses after the trajectory's last keyframe, so the
         page draws the trajectory up to the robot between two queries of the map.
 
-        The observations are placed with the kept pose nearest their stamp, which is the newest
-        pose unless the poses run ahead of the detector (a fast playback).
+        The observations are placed with the pose at their stamp, interpolated between the kept
+        poses around it (the nearest where none is on one side): the poses run ahead of the
+        frames, and a fast playback may have its frame's own pose dropped on the way.
         """
         with self._lock:
             pose = self._poses[-1] if self._poses else None
             obs = self._observations
-            near = min(self._poses, key=lambda p: abs(p.stamp - obs.stamp)) if obs else None
+            near = _pose_at(self._poses, obs.stamp) if obs else None
             status = self._status
             last = self._trajectory[-1][0] if self._trajectory else -math.inf
             recent = [[p.x, p.y] for p in self._poses if p.stamp > last]

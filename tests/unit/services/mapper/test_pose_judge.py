@@ -7,6 +7,7 @@ scene's truth.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -19,7 +20,7 @@ from wallmap.evaluation import evaluate_map
 from wallmap.offline import run_bag, walls
 from wallmap.scene import Glitch, PoseFaults
 from wallmap.scene.bags import tum_path_for
-from wallmap.services.mapper.pose_buffer import SourcePose
+from wallmap.services.mapper.pose_buffer import PoseBuffer, SourcePose
 from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
 from wallmap.services.mapper.wall_map import WallMap
 
@@ -165,9 +166,27 @@ def test_walls_that_say_nothing_clear_refuse_the_frame() -> None:
     assert judge.counts.refused == 1
 
 
-def test_the_judge_goes_on_from_its_state_file_entry() -> None:
-    judge, _, _ = _mapped_room()
-    again = PoseJudge.from_json(judge.to_json(), judge.config)
+def test_the_judge_goes_on_from_its_state_file_entry_exactly() -> None:
+    """Restored from the JSON of a state file, it judges the next frames as the original does:
+    a mapper restarted on its state re-takes the frames since the save and must map them the
+    same (same walls, same ids)."""
+    judge, wall_map = PoseJudge(JudgeConfig()), WallMap()  # the latency estimated too
+    poses = PoseBuffer()
+    track = [np.array([0.2 * math.cos(k / 5), 0.3 * math.sin(k / 7), 0.1 * k + 0.02 * math.sin(k)])
+             for k in range(120)]  # fmt: skip
+    for k, pose in enumerate(track):
+        poses.add(Pose(k * 0.1, *map(float, pose)))
+    for k, pose in enumerate(track[:80]):
+        verdict = judge.judge(_frame(k * 0.1, pose), _source(k * 0.1, pose), wall_map, poses)
+        wall_map.integrate(_frame(k * 0.1, pose), verdict.pose)
+    again = PoseJudge.from_json(json.loads(json.dumps(judge.to_json())), judge.config)
     assert again.summary() == judge.summary()
+    for k, pose in enumerate(track[80:], start=80):
+        noisy = pose + np.array([0.01, -0.01, math.radians(1.0)]) * math.sin(k)
+        mine = judge.judge(_frame(k * 0.1, pose), _source(k * 0.1, noisy), wall_map, poses)
+        theirs = again.judge(_frame(k * 0.1, pose), _source(k * 0.1, noisy), wall_map, poses)
+        assert mine.kind == theirs.kind
+        assert mine.pose == theirs.pose or np.array_equal(mine.pose.vector, theirs.pose.vector)
+    assert again.to_json() == judge.to_json()
     with pytest.raises(ValueError, match="finite"):
         PoseJudge.from_json({**judge.to_json(), "latency": float("nan")}, judge.config)

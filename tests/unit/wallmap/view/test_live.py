@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from wallmap.common.messages import Pose
+import pytest
+
+from wallmap.common.messages import Observations, Pose
 from wallmap.view.live import POSES_KEPT, LiveMap
 
 
@@ -22,3 +24,13 @@ def test_a_late_pose_into_a_full_buffer_takes_its_place_and_the_oldest_goes() ->
     assert xs == sorted(xs)
     assert xs[0] == 1.0
     assert POSES_KEPT - 1.5 in xs
+
+
+def test_observations_are_placed_with_the_pose_at_their_stamp() -> None:
+    live = LiveMap()
+    for stamp in (0.0, 0.02, 0.04):
+        live.add_pose(_pose(stamp))
+    live.set_observations(Observations("r", 7, 0.03, "base_link", ()))
+    placed = live.latest()["observations"]
+    assert placed["stamp"] == placed["pose"]["stamp"] == 0.03
+    assert placed["pose"]["x"] == pytest.approx(0.03)
