@@ -153,7 +153,7 @@ def _placed_scans(pipeline: Pipeline, bag: Path) -> np.ndarray:
     return np.vstack(placed)
 
 
-SOURCES = ["tf", "odom", "pose:/amcl_pose", "tum"]
+SOURCES = ["tf", "odom", "pose:/amcl_pose", "tum"]  # odom also drifts (2 %, 1 deg/m): see --slam
 
 
 def generated(latencies: list[float]) -> None:

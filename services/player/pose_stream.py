@@ -25,6 +25,7 @@ from wallmap.services.player.placement import Placement
 POSE_PERIOD = 0.02  # s between the grid's poses
 LOOKAHEAD = 0.6  # s past the next frame's stamp: more than any latency the mapper takes
 DROPOUT = 0.1  # s from the nearest pose of the source: farther, a grid pose is not sent
+SAME_STAMP = 1e-6  # s: a frame's stamp this close to a grid stamp is that stamp (sent once)
 
 
 class PoseStream:
@@ -48,7 +49,9 @@ class PoseStream:
     def until(self, frame_stamp: float) -> list[Pose]:
         """The poses to send before the frame stamped ``frame_stamp``: its own, then the grid's.
 
-        The frame's own pose comes first: the mapper's buffer takes poses in any order.
+        The frame's own pose comes first: the mapper's buffer takes poses in any order. Each
+        stamp is sent once: a frame stamped on the grid where the grid has been sent already
+        has its pose sent with it.
         """
         if self._sent is not None and frame_stamp < self._sent - 2 * LOOKAHEAD - 1.0:
             self._sent = None  # played again from earlier (a seek back, a loop)
@@ -59,8 +62,11 @@ class PoseStream:
         grid = POSE_PERIOD * np.arange(
             math.floor(start / POSE_PERIOD) + 1, math.floor(horizon / POSE_PERIOD) + 1
         )
+        grid = grid[np.abs(grid - frame_stamp) > SAME_STAMP]  # the frame's own is sent instead
+        on_grid = abs(frame_stamp - POSE_PERIOD * round(frame_stamp / POSE_PERIOD)) <= SAME_STAMP
+        sent = on_grid and self._sent is not None and frame_stamp <= self._sent + SAME_STAMP
         poses = []
-        for stamp in (frame_stamp, *grid.tolist()):
+        for stamp in ([] if sent else [frame_stamp]) + grid.tolist():
             pose = self._pose_at(stamp) if self._covered(stamp) else None
             if pose is not None:
                 poses.append(pose)

@@ -27,7 +27,7 @@ def test_poses_go_out_up_to_the_lookahead_once_each() -> None:
     grid = [p.stamp for p in first[1:]]
     assert grid[0] == pytest.approx(10.0 - LOOKAHEAD + POSE_PERIOD)
     assert grid[-1] == pytest.approx(10.0 + LOOKAHEAD)
-    assert np.allclose(np.diff(grid), POSE_PERIOD)
+    assert np.allclose(np.diff(sorted([10.0, *grid])), POSE_PERIOD)  # 10.0 is the frame's own
     second = [p.stamp for p in stream.until(10.1)[1:]]
     assert second[0] > grid[-1]  # nothing sent twice
     assert second[-1] == pytest.approx(10.1 + LOOKAHEAD)
@@ -88,3 +88,10 @@ def test_faults_make_a_source_late_noisy_and_wrong_for_a_while() -> None:
     np.testing.assert_allclose(glitch.yaw[~wrong], truth.yaw[~wrong])
     with pytest.raises(ValueError, match="START:DURATION"):
         Glitch.parse("12:3")
+
+
+def test_every_stamp_is_sent_once_where_frames_fall_on_the_grid() -> None:
+    """15 Hz frames fall on the 50 Hz grid every 0.2 s: their pose is not sent twice."""
+    stream = PoseStream(lambda t: Pose(t, t, 0.0, 0.0))
+    stamps = [p.stamp for k in range(60) for p in stream.until(1700000000.0 + k / 15)]
+    assert len(stamps) == len(set(round(s, 6) for s in stamps))
