@@ -58,9 +58,10 @@ def _explained(reply: dict, bag: Path) -> float:
     return float(np.mean(np.concatenate(distances) <= 0.05))
 
 
+# The defaults take the motion capture (the bag's only pose topic): the same run as naming it,
+# which the real-time run does.
 JACKAL_RUNS = [
     ("defaults", ("--fast",)),
-    ("motion capture", ("--fast", "--pose-source", MOCAP)),
     ("motion capture, real time", ("--pose-source", MOCAP)),
     ("scan matching", ("--fast", "--odometry")),
 ]
