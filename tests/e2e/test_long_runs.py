@@ -120,6 +120,11 @@ def test_a_looping_player_stopped_by_a_signal_exits_0(stack, long_bags, how) -> 
     _services(stack)
     player = stack.start("player", "player", str(scene.path), "--rate", "8", "--loop",
                          *stack.zenoh_args)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while " frames on " not in player.output():  # it has read the bag and starts playing
+        assert time.monotonic() < deadline, player.output()
+        assert player.proc.poll() is None, player.output()
+        time.sleep(0.1)
     time.sleep(9.0)  # one pass (6 s) and half the next
     assert player.proc.poll() is None, player.output()
     assert player.stop(sig=how) == 0
