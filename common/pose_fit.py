@@ -158,7 +158,7 @@ def fit(
         if float(np.abs(step).max()) < 1e-6:  # a micrometre, a microradian
             break
     x, residual, h, s_inv = _linearized(xi, source, pairs, active)
-    normal = info + np.einsum("nik,nij,njl->kl", h, s_inv, h)
+    normal = info + np.einsum("nkj,njl->kl", np.einsum("nik,nij->nkj", h, s_inv), h)
     posterior = np.zeros((STATE, STATE))
     posterior[np.ix_(index, index)] = np.linalg.inv(normal)
     posterior = 0.5 * (posterior + posterior.T)
