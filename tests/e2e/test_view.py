@@ -510,17 +510,17 @@ def test_api_sends_only_what_changed_and_skips_stale_updates():
     assert live.delta(0)["walls"] == now["walls"]
 
 
-def test_latest_observations_are_placed_with_the_pose_nearest_their_stamp():
+def test_latest_observations_are_placed_with_the_pose_at_their_stamp():
     live = LiveMap()
     for stamp, x in ((1.0, 0.0), (2.0, 5.0), (3.0, 9.0)):
         live.add_pose(Pose(stamp, x, 0.0, np.pi / 2))
     ends = np.array([2.0, -1.0]), np.array([2.0, 1.0])
     seen = WallObservation(np.array([2.0, 0.0]), np.eye(2) * 1e-4, *ends, 50, 0.01)
-    live.set_observations(Observations("run", 7, 2.1, "base_link", [seen]))
+    live.set_observations(Observations("run", 7, 2.25, "base_link", [seen]))
     latest = live.latest()
     assert latest["pose"]["x"] == 9.0  # the newest
     assert latest["recent"] == [[0.0, 0.0], [5.0, 0.0], [9.0, 0.0]]  # no trajectory yet
-    assert latest["observations"]["pose"]["x"] == 5.0  # the one at the frame's stamp
+    assert latest["observations"]["pose"]["x"] == 6.0  # interpolated at the frame's stamp
     placed = latest["observations"]["walls"][0]
-    np.testing.assert_allclose(placed["p0"], [6.0, 2.0], atol=1e-12)
-    np.testing.assert_allclose(placed["p1"], [4.0, 2.0], atol=1e-12)
+    np.testing.assert_allclose(placed["p0"], [7.0, 2.0], atol=1e-12)
+    np.testing.assert_allclose(placed["p1"], [5.0, 2.0], atol=1e-12)
