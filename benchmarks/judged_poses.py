@@ -33,16 +33,13 @@ from wallmap.common.messages import Frame
 from wallmap.common.se2 import transform_points
 from wallmap.config import Config
 from wallmap.evaluation import evaluate_map
-from wallmap.offline import pipeline_for, scan_rows
+from wallmap.offline import pipeline_for, played, scan_rows
 from wallmap.plot import write_picture
 from wallmap.scene import Glitch, PoseFaults, load_truth, write_scene_bag
 from wallmap.scene.bags import tum_path_for
 from wallmap.services.mapper import serving
 from wallmap.services.mapper.pose_buffer import Lookup
 from wallmap.services.pipeline import Pipeline
-from wallmap.services.player.bag_contents import LASERSCAN
-from wallmap.services.player.pose_stream import stream_of
-from wallmap.services.player.sources import open_source
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 JACKAL = REAL / "jackal_arena_2026-02-17-15-54-31"
@@ -66,24 +63,12 @@ def timed_run(bag: Path, config: Config) -> tuple[Pipeline, list[float]]:
     """The recording through the pipeline as ``wallmap.offline.run_bag`` runs it, timing the
     mapper's part of each frame (pose lookup, judgement, map update) apart from detection."""
     pipeline = pipeline_for(config)
-    source = config.player.source
-    if config.up.odometry:
-        source = replace(source, pose_source="none")
-    mapper_ms = []
-    with open_source(bag, source) as recording:
-        sensor = "scan" if recording.sensor_type == LASERSCAN else "depth"
-        stream = stream_of(recording)
-        for seq, (frame, _) in enumerate(recording.frames(pipeline.rows)):
-            for pose in stream.until(frame.stamp):
-                pipeline.add_pose(pose)
-            message = Frame(
-                "bench", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor,
-                sensor, band=frame.band, sweep=frame.sweep,
-            )  # fmt: skip
-            if pipeline.tracker is None:
-                _mapper_step(pipeline, message, mapper_ms)
-            else:
-                pipeline.step(message)
+    mapper_ms: list[float] = []
+    for message in played(bag, config, pipeline):
+        if pipeline.tracker is None:
+            _mapper_step(pipeline, message, mapper_ms)
+        else:
+            pipeline.step(message)
     return pipeline, mapper_ms
 
 

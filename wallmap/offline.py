@@ -73,6 +73,20 @@ def run_bag(
     """A recording (its first ``frames``, or all) through the pipeline; the pipeline after it."""
     config = config or Config()
     pipeline = pipeline_for(config)
+    for seq, message in enumerate(played(bag, config, pipeline)):
+        if frames is not None and seq >= frames:
+            break
+        step = pipeline.step(message)
+        if step is not None and step.pose is not None and poses is not None:
+            poses.append(step.pose)
+    return pipeline
+
+
+def played(bag: Path, config: Config, pipeline: Pipeline) -> Iterator[Frame]:
+    """The recording's frames as the player sends them, each once its poses are in ``pipeline``.
+
+    The source's poses up to a little past each frame, as the player streams them ahead.
+    """
     source = config.player.source
     if config.up.odometry:  # the scans make the poses: the recording's are not read
         source = replace(source, pose_source="none")
@@ -80,18 +94,12 @@ def run_bag(
         sensor = "scan" if recording.sensor_type == LASERSCAN else "depth"
         stream = stream_of(recording)
         for seq, (frame, _) in enumerate(recording.frames(pipeline.rows)):
-            if frames is not None and seq >= frames:
-                break
             for pose in stream.until(frame.stamp):
                 pipeline.add_pose(pose)
-            message = Frame(
+            yield Frame(
                 "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor,
                 sensor, band=frame.band, sweep=frame.sweep,
             )  # fmt: skip
-            step = pipeline.step(message)
-            if step is not None and step.pose is not None and poses is not None:
-                poses.append(step.pose)
-    return pipeline
 
 
 def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[float, Array]]:

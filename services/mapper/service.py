@@ -19,7 +19,7 @@ import uuid
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -45,6 +45,8 @@ from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
 from wallmap.services.mapper.ros2_out import Ros2Outlet
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Mapping
+
+T = TypeVar("T")
 
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
 HOLD_POLL = 0.02  # s between looks at a held gap
@@ -265,27 +267,32 @@ def _corrector(mapper: MapperSettings) -> PoseCorrector | None:
     """The pose correction of ``--slam``, from the state file when it has one."""
     if not mapper.slam.enabled:
         return None
-    saved = state_file.load_entry(mapper.state, "slam") if mapper.state else None
-    if saved is None:
-        return PoseCorrector(mapper.slam)
-    try:
-        return PoseCorrector.from_json(saved, mapper.slam)
-    except (KeyError, TypeError, ValueError) as err:
-        msg = f"state file {mapper.state} has an unusable 'slam' entry ({err}); move it away"
-        raise state_file.StateError(msg) from err
+    return _restored(mapper, "slam", lambda: PoseCorrector(mapper.slam),
+                     lambda saved: PoseCorrector.from_json(saved, mapper.slam))  # fmt: skip
 
 
 def _judge(mapper: MapperSettings) -> PoseJudge | None:
     """The pose judge, from the state file when it has one (what it learnt of the source)."""
     if not mapper.judge.enabled:
         return None
-    saved = state_file.load_entry(mapper.state, "poses") if mapper.state else None
+    return _restored(mapper, "poses", lambda: PoseJudge(mapper.judge),
+                     lambda saved: PoseJudge.from_json(saved, mapper.judge))  # fmt: skip
+
+
+def _restored(
+    mapper: MapperSettings,
+    entry: str,
+    fresh: Callable[[], T],
+    restore: Callable[[dict[str, Any]], T],
+) -> T:
+    """A state file's ``entry`` restored, or ``fresh()`` without one; one line if unusable."""
+    saved = state_file.load_entry(mapper.state, entry) if mapper.state else None
     if saved is None:
-        return PoseJudge(mapper.judge)
+        return fresh()
     try:
-        return PoseJudge.from_json(saved, mapper.judge)
+        return restore(saved)
     except (KeyError, TypeError, ValueError) as err:
-        msg = f"state file {mapper.state} has an unusable 'poses' entry ({err}); move it away"
+        msg = f"state file {mapper.state} has an unusable {entry!r} entry ({err}); move it away"
         raise state_file.StateError(msg) from err
 
 
