@@ -190,3 +190,20 @@ def test_the_judge_goes_on_from_its_state_file_entry_exactly() -> None:
     assert again.to_json() == judge.to_json()
     with pytest.raises(ValueError, match="finite"):
         PoseJudge.from_json({**judge.to_json(), "latency": float("nan")}, judge.config)
+
+
+def test_a_mapper_restored_on_a_state_file_takes_its_judge_or_says_why_not(tmp_path) -> None:
+    """The judge a state file kept is the one a restarted mapper goes on with; a damaged entry
+    is one readable line, not a traceback."""
+    from dataclasses import replace as replaced  # the service shell, imported where it is tested
+
+    from wallmap.services.mapper import service
+
+    judge, _, _ = _mapped_room()
+    state = tmp_path / "map.json"
+    state.write_text(json.dumps({"poses": judge.to_json()}))
+    settings = replaced(service.MapperSettings(), state=state, judge=judge.config)
+    assert service._judge(settings).summary() == judge.summary()
+    state.write_text(json.dumps({"poses": {**judge.to_json(), "offset": [1.0]}}))
+    with pytest.raises(service.state_file.StateError, match="unusable 'poses' entry"):
+        service._judge(settings)
