@@ -55,6 +55,7 @@ FLOOR = Trust(noise=(0.002, math.radians(0.05)), drift=(0.0002, math.radians(0.0
 MAX_LATENCY = 0.5  # s: a player sends poses this far past each frame, and a bit more
 TAIL = 4.0  # a frame the walls contradict is tried again with the source's noise this much wider
 ADOPT_AFTER = 10.0  # s of recovered frames agreeing on one new offset: the source moved for good
+SUSPECT_FOR = 5.0  # s after a jump that the walls neither confirmed nor refuted: it was real
 LATENCY_EVERY = 10  # frames between two latency estimates
 REMAP_SHIFT = 0.005  # s: a first latency estimate this far from the guess remaps the frames so far
 
@@ -148,7 +149,9 @@ class PoseJudge:
         self.noise = NoiseScale()
         self.turns = LatencyEstimator(cfg.max_latency)
         self.jumps = JumpDetector()
-        self.suspect = False  # the source jumped and the walls have not agreed with it since
+        # When the source jumped (its stamp), while the walls have not agreed with it since.
+        self.suspect: float | None = None
+        self.jumped: float | None = None  # the stamp of the source's last jump
         self.counts = _Counts()
         self.stamp: float | None = None
         self._alternative: tuple[Array, float, float] | None = None  # offset, since, last
@@ -175,14 +178,17 @@ class PoseJudge:
         self._learn_latency(frame, poses)
         self._predict(frame.stamp)
         if self.jumps.add(frame.stamp, source.pose.vector):
-            self.suspect = True  # until the walls agree with the source again
+            self.jumped = frame.stamp
+            if self.suspect is None:
+                self.suspect = frame.stamp  # until the walls agree with the source again
+        if self.suspect is not None and frame.stamp - self.suspect > SUSPECT_FOR:
+            self.suspect = None  # nor did they disagree: a jump that was the robot's own
         mean, cov = self._prior(source)
         x0, jx = pose_fit.frame_pose(mean, source.pose.vector)
         found = candidates(frame, x0, wall_map, self.config.min_obs)
         near = found.near()
         if not near:
-            self.counts.unjudged += 1
-            return Verdict(_as_pose(source.pose, frame.stamp, x0, jx @ cov @ jx.T), "unjudged")
+            return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
         self.counts.judged += 1
         matched = False
         for widen in (1.0, TAIL):  # a source's errors have longer tails than a Gaussian's
@@ -192,12 +198,21 @@ class PoseJudge:
             if fitted is not None and self._consistent(fitted, mean, prior, near):
                 return self._accept(fitted, x0, jx @ prior @ jx.T, source, frame.stamp)
             matched = matched or fitted is not None
-        if not matched and not self.suspect:
+        if not matched and self.suspect is None:
             # No settled wall takes any observation, and the source has not jumped: the
             # walls near are not what this frame sees (a new wall in front of an old one).
-            self.counts.unjudged += 1
-            return Verdict(_as_pose(source.pose, frame.stamp, x0, jx @ cov @ jx.T), "unjudged")
+            return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
         return self._recover(frame, source, wall_map, x0, near)
+
+    def _unjudged(self, source: SourcePose, stamp: float, x0: Array, cov: Array) -> Verdict:
+        """No settled wall can check the pose: taken as given, but starting no wall for a while.
+
+        For ``SUSPECT_FOR`` after the source jumped: one frame that fits a wrong pose may have
+        cleared the doubt, and the frames after it would start a turned copy of what they saw.
+        """
+        self.counts.unjudged += 1
+        steady = self.jumped is None or stamp - self.jumped > SUSPECT_FOR
+        return Verdict(_as_pose(source.pose, stamp, x0, cov), "unjudged", start_walls=steady)
 
     def _learn_latency(self, frame: Observations, poses: PoseBuffer) -> None:
         """The frame's lines into the turning history; every LATENCY_EVERY frames, re-estimate."""
@@ -226,7 +241,8 @@ class PoseJudge:
         self._alternative = None
         self.remap_due = False
         self.jumps = JumpDetector()
-        self.suspect = False
+        self.suspect = None
+        self.jumped = None
 
     def _predict(self, stamp: float) -> None:
         """Time passed since the last frame: the source's persistent error may have changed.
@@ -291,7 +307,7 @@ class PoseJudge:
         At least one, or most of them after the source jumped.
         """
         matched = int(np.sum(fitted.m2 <= CHI2_2DOF_999))
-        if matched < (max(1, math.ceil(0.5 * near)) if self.suspect else 1):
+        if matched < (max(1, math.ceil(0.5 * near)) if self.suspect is not None else 1):
             return False
         d = pose_fit.difference(fitted.xi, mean)
         return float(d @ np.linalg.solve(cov, d)) <= CHI2_6DOF_999
@@ -308,7 +324,7 @@ class PoseJudge:
         carried = fitted.cov[pose_fit.OFFSET, pose_fit.OFFSET]
         self.cov = 0.5 * (carried + carried.T)
         self._alternative = None
-        self.suspect = False
+        self.suspect = None
         moved = fitted.pose - x0
         moved[2] = se2.wrap(float(moved[2]))
         self.learner.add(moved, np.clip(np.diag(prior_cov - fitted.pose_cov), 0.0, None))
@@ -387,6 +403,7 @@ class PoseJudge:
             "settled": self.settled,
             "stamp": self.stamp,
             "suspect": self.suspect,
+            "jumped": self.jumped,
             "alternative": alternative,
             "learner": self.learner.to_json(),
             "noise": self.noise.to_json(),
@@ -412,7 +429,8 @@ class PoseJudge:
             judge.settled = bool(data["settled"])
             judge.turns.restore(data["turns"])
         judge.stamp = None if data["stamp"] is None else float(data["stamp"])
-        judge.suspect = bool(data["suspect"])
+        judge.suspect = None if data["suspect"] is None else float(data["suspect"])
+        judge.jumped = None if data["jumped"] is None else float(data["jumped"])
         alternative = data["alternative"]
         if alternative is not None:
             judge._alternative = (np.asarray(alternative[0], float), *map(float, alternative[1:]))
