@@ -207,3 +207,18 @@ def test_a_mapper_restored_on_a_state_file_takes_its_judge_or_says_why_not(tmp_p
     state.write_text(json.dumps({"poses": {**judge.to_json(), "offset": [1.0]}}))
     with pytest.raises(service.state_file.StateError, match="unusable 'poses' entry"):
         service._judge(settings)
+
+
+def test_after_the_source_jumps_a_frame_no_wall_can_check_starts_none_for_a_while() -> None:
+    """One frame fitted to a wrong pose may clear the doubt; the frames after it, seeing only a
+    new wall, would start a turned copy of it. Five seconds on, the source is taken again."""
+    judge, wall_map, poses = _mapped_room()
+    true = np.array([0.0, 0.0, poses[-1][2] + 0.1])
+    wrong = true + np.array([0.0, 0.0, math.radians(15.0)])
+    judge.judge(_frame(6.1, true), _source(6.1, wrong), wall_map, None)
+    assert judge.jumped == 6.1
+    far = [((20.0, -5.0), (20.0, 5.0))]  # a wall far from every mapped one
+    soon = judge.judge(_frame(6.2, true, far), _source(6.2, true), wall_map, None)
+    later = judge.judge(_frame(11.3, true, far), _source(11.3, true), wall_map, None)
+    assert (soon.kind, soon.start_walls) == ("unjudged", False)
+    assert (later.kind, later.start_walls) == ("unjudged", True)
