@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common import se2
 from wallmap.common.codec import MessageError, decode, encode
 from wallmap.common.pose3d import pose_matrix, rpy_from_quaternion
 
@@ -138,6 +139,23 @@ class Pose:
     def matrix(self) -> Array:
         """The 4x4 transform frame <- child."""
         return pose_matrix(self.x, self.y, self.z, self.roll, self.pitch, self.yaw)
+
+    def towards(self, later: Pose, stamp: float) -> Pose:
+        """The planar pose at ``stamp`` on the way to ``later``, interpolated.
+
+        Linear in position, the yaw the short way round; the covariance of the nearer of the two.
+        """
+        f = (stamp - self.stamp) / (later.stamp - self.stamp)
+        dyaw = se2.wrap(later.yaw - self.yaw)
+        return Pose(
+            stamp=stamp,
+            x=self.x + f * (later.x - self.x),
+            y=self.y + f * (later.y - self.y),
+            yaw=se2.wrap(self.yaw + f * dyaw),
+            cov=(self if f < 0.5 else later).cov,
+            frame=self.frame,
+            child=self.child,
+        )
 
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding; the 6-DoF fields only when the pose has them."""

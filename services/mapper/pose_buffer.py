@@ -50,21 +50,6 @@ class PoseBufferConfig:
     jump_angle: float = 0.5
 
 
-def _interpolate(a: Pose, b: Pose, stamp: float) -> Pose:
-    f = (stamp - a.stamp) / (b.stamp - a.stamp)
-    dyaw = se2.wrap(b.yaw - a.yaw)
-    nearest = a if f < 0.5 else b
-    return Pose(
-        stamp=stamp,
-        x=a.x + f * (b.x - a.x),
-        y=a.y + f * (b.y - a.y),
-        yaw=se2.wrap(a.yaw + f * dyaw),
-        cov=nearest.cov,
-        frame=a.frame,
-        child=a.child,
-    )
-
-
 @dataclass(frozen=True)
 class SourcePose:
     """The source's pose at a stamp, as the pose judge needs it.
@@ -150,7 +135,7 @@ class PoseBuffer:
         if after.stamp - before.stamp > self.config.max_gap:
             near = min((before, after), key=lambda p: abs(p.stamp - stamp))
             return near if abs(near.stamp - stamp) <= tol else Lookup.MISSING
-        return _interpolate(before, after, stamp)
+        return before.towards(after, stamp)
 
     def sample(self, stamp: float, *, extrapolate: float = 0.0) -> SourcePose | Lookup:
         """The pose at ``stamp`` with the source's velocity there, or why there is none.

@@ -38,14 +38,7 @@ def _pose_at(poses: deque[Pose], stamp: float) -> Pose | None:
     after = poses[i]
     if after.stamp == stamp:
         return after
-    before = poses[i - 1]
-    share = (stamp - before.stamp) / (after.stamp - before.stamp)
-    return Pose(
-        stamp,
-        before.x + share * (after.x - before.x),
-        before.y + share * (after.y - before.y),
-        se2.wrap(before.yaw + share * se2.wrap(after.yaw - before.yaw)),
-    )
+    return poses[i - 1].towards(after, stamp)
 
 
 class LiveMap:
