@@ -3,8 +3,8 @@
 A pose source is judged against the walls by the mapper, which estimates its latency: the pose
 that describes a frame's instant is the source's pose some tens of milliseconds later. So the
 mapper needs the source's poses around and after each frame's stamp, not only one at it. The
-player sends them on a 50 Hz grid (and at every frame's stamp), up to ``LOOKAHEAD`` past the frame
-it sends next, as a motion-capture system or a SLAM would have sent them by then.
+player sends them on a 50 Hz grid up to ``LOOKAHEAD`` past the frame it sends next, as a
+motion-capture system or a SLAM would have sent them by then.
 
 Where the source has no pose (a tracker's dropout), none is made up: the stream leaves the gap
 for the mapper to see, and the mapper judges a pose interpolated across it as the guess it is.
@@ -25,7 +25,7 @@ from wallmap.services.player.placement import Placement
 POSE_PERIOD = 0.02  # s between the grid's poses
 LOOKAHEAD = 0.6  # s past the next frame's stamp: more than any latency the mapper takes
 DROPOUT = 0.1  # s from the nearest pose of the source: farther, a grid pose is not sent
-SAME_STAMP = 1e-6  # s: a frame's stamp this close to a grid stamp is that stamp (sent once)
+SAME_STAMP = 1e-6  # s: a frame's stamp this close to a sent pose's is that stamp
 
 
 class PoseStream:
@@ -44,17 +44,20 @@ class PoseStream:
     ) -> None:
         self._pose_at = pose_at
         self._stamps = stamps
-        self._sent: float | None = None  # the newest stamp sent
+        self._sent: float | None = None  # the newest grid stamp looked at
+        self._newest: float | None = None  # the newest stamp sent
 
     def until(self, frame_stamp: float) -> list[Pose]:
-        """The poses to send before the frame stamped ``frame_stamp``: its own, then the grid's.
+        """The poses to send before the frame stamped ``frame_stamp``: the grid's, each once.
 
-        The frame's own pose comes first: the mapper's buffer takes poses in any order. Each
-        stamp is sent once: a frame stamped on the grid where the grid has been sent already
-        has its pose sent with it.
+        The mapper interpolates a frame's pose between grid poses sent several frames before it,
+        so which poses it has when the frame arrives never depends on which of two paths (poses
+        straight to it, frames through the detector) was faster. Only where the source's poses
+        end before the frame (the end of a run) is the frame's own pose sent, as the newest: the
+        mapper waits for it, so that one cannot race either.
         """
         if self._sent is not None and frame_stamp < self._sent - 2 * LOOKAHEAD - 1.0:
-            self._sent = None  # played again from earlier (a seek back, a loop)
+            self._sent = self._newest = None  # played again from earlier (a seek back, a loop)
         horizon = frame_stamp + LOOKAHEAD
         start = frame_stamp - LOOKAHEAD  # after a seek forward, no more than that back
         if self._sent is not None:
@@ -62,16 +65,20 @@ class PoseStream:
         grid = POSE_PERIOD * np.arange(
             math.floor(start / POSE_PERIOD) + 1, math.floor(horizon / POSE_PERIOD) + 1
         )
-        grid = grid[np.abs(grid - frame_stamp) > SAME_STAMP]  # the frame's own is sent instead
-        on_grid = abs(frame_stamp - POSE_PERIOD * round(frame_stamp / POSE_PERIOD)) <= SAME_STAMP
-        sent = on_grid and self._sent is not None and frame_stamp <= self._sent + SAME_STAMP
-        poses = []
-        for stamp in ([] if sent else [frame_stamp]) + grid.tolist():
-            pose = self._pose_at(stamp) if self._covered(stamp) else None
-            if pose is not None:
-                poses.append(pose)
+        poses = [pose for stamp in grid.tolist() if (pose := self._pose(stamp)) is not None]
         self._sent = max(self._sent or start, float(grid[-1]) if len(grid) else start)
+        newest = poses[-1].stamp if poses else self._newest
+        if newest is None or frame_stamp > newest + SAME_STAMP:
+            own = self._pose(frame_stamp)
+            if own is not None:
+                poses.append(own)
+                newest = frame_stamp
+        self._newest = newest
         return poses
+
+    def _pose(self, stamp: float) -> Pose | None:
+        """The source's pose at ``stamp``, or None in a dropout or beyond its poses."""
+        return self._pose_at(stamp) if self._covered(stamp) else None
 
     def _covered(self, stamp: float) -> bool:
         """Whether the source has a pose within ``DROPOUT`` of ``stamp``."""

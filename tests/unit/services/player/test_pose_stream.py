@@ -22,15 +22,23 @@ def _line(stamp: float) -> Pose:
 
 def test_poses_go_out_up_to_the_lookahead_once_each() -> None:
     stream = PoseStream(_line)
-    first = stream.until(10.0)
-    assert first[0].stamp == 10.0  # the frame's own pose first
-    grid = [p.stamp for p in first[1:]]
+    grid = [p.stamp for p in stream.until(10.0)]
     assert grid[0] == pytest.approx(10.0 - LOOKAHEAD + POSE_PERIOD)
     assert grid[-1] == pytest.approx(10.0 + LOOKAHEAD)
-    assert np.allclose(np.diff(sorted([10.0, *grid])), POSE_PERIOD)  # 10.0 is the frame's own
-    second = [p.stamp for p in stream.until(10.1)[1:]]
+    assert np.allclose(np.diff(grid), POSE_PERIOD)  # the grid alone: 10.0 is on it
+    second = [p.stamp for p in stream.until(10.1)]
     assert second[0] > grid[-1]  # nothing sent twice
     assert second[-1] == pytest.approx(10.1 + LOOKAHEAD)
+
+
+def test_a_frame_past_the_source_s_last_pose_gets_its_own_as_the_newest() -> None:
+    """Off the grid a frame's pose is interpolated, except past the source's end: it is sent."""
+    stream = PoseStream(lambda t: _line(t) if t <= 10.005 else None)  # as tf: no pose past it
+    sent = [p.stamp for p in stream.until(9.5)]
+    assert 9.5 in sent  # on the grid
+    assert not [s for s in stream.until(9.91) if abs(s.stamp - 9.91) < 1e-9]  # 9.92 is sent
+    last = stream.until(10.005)
+    assert [p.stamp for p in last] == [10.005]  # its own, past the grid's last (10.0)
 
 
 def test_a_dropout_is_left_a_gap_and_a_seek_back_starts_afresh() -> None:
@@ -38,7 +46,7 @@ def test_a_dropout_is_left_a_gap_and_a_seek_back_starts_afresh() -> None:
     stream = PoseStream(_line, stamps)
     sent = [p.stamp for p in stream.until(5.2)]
     assert not any(5.1 < s < 5.5 for s in sent)
-    assert stream.until(1.0)[0].stamp == 1.0
+    assert stream.until(1.0)[0].stamp == pytest.approx(1.0 - LOOKAHEAD + POSE_PERIOD)
     assert len(stream.until(1.05)) > 1
 
 
