@@ -35,6 +35,7 @@ STATE = 6
 OFFSET = slice(0, 3)  # D: the source's error that persists, in the robot's frame
 NOISE = slice(3, 6)  # w: this frame's own error, in the robot's frame
 ANGLES = (2, 5)
+STEP_TOLERANCE = 1e-3  # m, rad: a Gauss-Newton step this small is the last one needed
 
 
 @dataclass(frozen=True)
@@ -140,28 +141,42 @@ def fit(
         pairs: The frame's observations and their walls (none: the prior is the answer).
         active: Which states are estimated (a boolean mask); the others stay at their mean.
             Default: all.
-        iterations: Gauss-Newton steps at most; it stops sooner once the step is tiny.
+        iterations: Gauss-Newton steps at most; it stops sooner once a step is small
+            (``STEP_TOLERANCE``).
     """
     active = np.ones(STATE, dtype=bool) if active is None else active
     index = np.flatnonzero(active)
     info = np.linalg.inv(cov[np.ix_(index, index)])
     xi = mean.copy()
+    converged = False
     for _ in range(iterations if len(pairs) else 0):
         _, residual, h, s_inv = _linearized(xi, source, pairs, active)
-        ht_s = np.einsum("nik,nij->nkj", h, s_inv)
-        normal = info + np.einsum("nkj,njl->kl", ht_s, h)
-        gradient = info @ difference(mean, xi)[index] + np.einsum("nkj,nj->k", ht_s, residual)
+        normal, gradient = _normal_equations(info, difference(mean, xi)[index], h, s_inv, residual)
         step = np.linalg.solve(normal, gradient)
         xi[index] += step
         for i in ANGLES:
             xi[i] = se2.wrap(float(xi[i]))
-        if float(np.abs(step).max()) < 1e-6:  # a micrometre, a microradian
+        if float(np.abs(step).max()) < STEP_TOLERANCE:
+            # Gauss-Newton converges quadratically here: the next step would be about this
+            # one squared, a micrometre. The linearisation just made holds at the new mean.
+            residual = residual - h @ step
+            converged = True
             break
-    x, residual, h, s_inv = _linearized(xi, source, pairs, active)
-    normal = info + np.einsum("nkj,njl->kl", np.einsum("nik,nij->nkj", h, s_inv), h)
+    if not converged:
+        _, residual, h, s_inv = _linearized(xi, source, pairs, active)
+        normal, _ = _normal_equations(info, difference(mean, xi)[index], h, s_inv, residual)
     posterior = np.zeros((STATE, STATE))
     posterior[np.ix_(index, index)] = np.linalg.inv(normal)
     posterior = 0.5 * (posterior + posterior.T)
-    _, jx = frame_pose(xi, source)
+    x, jx = frame_pose(xi, source)
     m2 = np.einsum("ni,nij,nj->n", residual, s_inv, residual)
     return Fit(xi, posterior, x, jx @ posterior @ jx.T, m2)
+
+
+def _normal_equations(
+    info: Array, to_mean: Array, h: Array, s_inv: Array, residual: Array
+) -> tuple[Array, Array]:
+    """The Gauss-Newton system ``(info + H^T S^-1 H) step = info (mean - xi) + H^T S^-1 r``."""
+    ht_s = np.einsum("nik,nij->nkj", h, s_inv)
+    normal = info + np.einsum("nkj,njl->kl", ht_s, h)
+    return normal, info @ to_mean + np.einsum("nkj,nj->k", ht_s, residual)
