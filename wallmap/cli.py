@@ -58,9 +58,6 @@ from wallmap.options import (
     add_command,
     given,
 )
-from wallmap.plot import write_picture
-from wallmap.scene import Camera, Glitch, PoseFaults, write_scene_bag
-from wallmap.scene.bags import tum_path_for
 from wallmap.services.detector import service as detector_service
 from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import make_pose_input
@@ -171,6 +168,10 @@ def _cmd_up(args: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
+    # The scenes and the drawing are imported by their commands: every other would pay for them.
+    from wallmap.scene import Camera, PoseFaults, write_scene_bag  # noqa: PLC0415 - see above
+    from wallmap.scene.bags import tum_path_for  # noqa: PLC0415 - see above
+
     if args.out.exists():
         msg = f"{args.out} exists; choose a new path"
         raise FileExistsError(msg)
@@ -203,7 +204,19 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
     return 0
 
 
+def _glitch(text: str) -> object:
+    """``--glitch START:DUR:DEG:M`` as a ``wallmap.scene.Glitch``, its error in one line."""
+    from wallmap.scene import Glitch  # noqa: PLC0415 - see _cmd_scene
+
+    try:
+        return Glitch.parse(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def _cmd_plot(args: argparse.Namespace, config: Config) -> int:
+    from wallmap.plot import write_picture  # noqa: PLC0415 - see _cmd_scene
+
     write_picture(args.out, _fetch(args, config, trajectory="true"), size=args.size)
     print(f"picture: {args.out}")
     return 0
@@ -306,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="white noise of every pose's heading (degrees)")  # fmt: skip
     p.add_argument("--pose-position-noise", type=non_negative, default=0.0, metavar="M",
                    help="white noise of every pose's position (m)")  # fmt: skip
-    p.add_argument("--glitch", type=Glitch.parse, action="append", metavar="START:DUR:DEG:M",
+    p.add_argument("--glitch", type=_glitch, action="append", metavar="START:DUR:DEG:M",
                    help="a stretch of wrong poses: from START s for DUR s, DEG degrees and M "
                    "metres off (repeatable)")  # fmt: skip
 

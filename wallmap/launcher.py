@@ -26,10 +26,7 @@ from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
-from wallmap.evaluation import evaluate_map
 from wallmap.map_client import format_table, to_json
-from wallmap.plot import write_picture
-from wallmap.scene import load_truth
 from wallmap.services.player.service import PlayerSettings
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
@@ -185,6 +182,11 @@ def _check_endpoint(settings: ZenohSettings) -> None:
 
 def _report(config: Config) -> None:
     """The final map: printed, scored, written as JSON (with the configuration), drawn."""
+    # Scoring and drawing, imported here: every `wallmap` command would pay for them.
+    from wallmap.evaluation import evaluate_map  # noqa: PLC0415 - see above
+    from wallmap.plot import write_picture  # noqa: PLC0415 - see above
+    from wallmap.scene import load_truth  # noqa: PLC0415 - see above
+
     options = config.up
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)

@@ -14,10 +14,10 @@ import time
 from typing import Protocol
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
 
 from wallmap.common.codec import MessageError
 from wallmap.common.messages import Pose, unpack_pose
+from wallmap.common.ros2_types import ros2_typestore
 from wallmap.common.ros_poses import (
     DEFAULT_CHILD,
     DEFAULT_PARENT,
@@ -53,7 +53,7 @@ class WallmapPoses:
 
 def _deserialize(payload: bytes, msgtype: str) -> object:
     try:
-        return _TYPESTORE.deserialize_cdr(payload, msgtype)
+        return ros2_typestore().deserialize_cdr(payload, msgtype)
     except Exception as err:  # the CDR decoder raises many types for bad bytes
         msg = f"not a CDR {msgtype} ({type(err).__name__}: {err})"
         raise MessageError(msg) from err
@@ -131,6 +131,3 @@ def make_pose_input(fmt: str, frames: str = f"{DEFAULT_PARENT}>{DEFAULT_CHILD}")
         return RosPoses(msgtype)
     msg = f"unknown --pose-format {fmt!r}; accepted: {', '.join(FORMATS)}"
     raise ValueError(msg)
-
-
-_TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)

@@ -20,41 +20,44 @@ from typing import Any
 
 import numpy as np
 import zenoh
-from rosbags.typesys import Stores, get_typestore
 
 from wallmap.common.map_records import MapReply, WallRecord
+from wallmap.common.ros2_types import ros2_typestore
 from wallmap.common.transport import Keys
 
-STORE = get_typestore(Stores.ROS2_HUMBLE)
-_T = STORE.types
 NAMESPACE = "walls"
 LINE_WIDTH = 0.05  # m
 COLOUR = (0.85, 0.25, 0.15, 1.0)  # RGBA
 
 
+def _msg(name: str) -> Any:
+    """A ROS 2 message class by its type name."""
+    return ros2_typestore().types[name]
+
+
 def _time(stamp: float) -> Any:
     sec = math.floor(stamp)
     nanosec = min(round((stamp - sec) * 1e9), 999_999_999)
-    return _T["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(nanosec))
+    return _msg("builtin_interfaces/msg/Time")(sec=int(sec), nanosec=int(nanosec))
 
 
 def _header(stamp: float, frame: str) -> Any:
-    return _T["std_msgs/msg/Header"](stamp=_time(stamp), frame_id=frame)
+    return _msg("std_msgs/msg/Header")(stamp=_time(stamp), frame_id=frame)
 
 
 def _point(x: float, y: float) -> Any:
-    return _T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0)
+    return _msg("geometry_msgs/msg/Point")(x=float(x), y=float(y), z=0.0)
 
 
 def _identity() -> Any:
-    return _T["geometry_msgs/msg/Pose"](
+    return _msg("geometry_msgs/msg/Pose")(
         position=_point(0.0, 0.0),
-        orientation=_T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation=_msg("geometry_msgs/msg/Quaternion")(x=0.0, y=0.0, z=0.0, w=1.0),
     )
 
 
 def _marker(wall_id: int, action: int, points: list[Any], stamp: float, frame: str) -> Any:
-    marker_type = _T["visualization_msgs/msg/Marker"]
+    marker_type = _msg("visualization_msgs/msg/Marker")
     return marker_type(
         header=_header(stamp, frame),
         ns=NAMESPACE,
@@ -62,20 +65,20 @@ def _marker(wall_id: int, action: int, points: list[Any], stamp: float, frame: s
         type=marker_type.LINE_LIST,
         action=action,
         pose=_identity(),
-        scale=_T["geometry_msgs/msg/Vector3"](x=LINE_WIDTH, y=0.0, z=0.0),
-        color=_T["std_msgs/msg/ColorRGBA"](r=COLOUR[0], g=COLOUR[1], b=COLOUR[2], a=COLOUR[3]),
-        lifetime=_T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
+        scale=_msg("geometry_msgs/msg/Vector3")(x=LINE_WIDTH, y=0.0, z=0.0),
+        color=_msg("std_msgs/msg/ColorRGBA")(r=COLOUR[0], g=COLOUR[1], b=COLOUR[2], a=COLOUR[3]),
+        lifetime=_msg("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
         frame_locked=False,
         points=points,
         colors=[],
         texture_resource="",
-        texture=_T["sensor_msgs/msg/CompressedImage"](
+        texture=_msg("sensor_msgs/msg/CompressedImage")(
             header=_header(stamp, frame), format="", data=_empty_bytes()
         ),
         uv_coordinates=[],
         text="",
         mesh_resource="",
-        mesh_file=_T["visualization_msgs/msg/MeshFile"](filename="", data=_empty_bytes()),
+        mesh_file=_msg("visualization_msgs/msg/MeshFile")(filename="", data=_empty_bytes()),
         mesh_use_embedded_materials=False,
     )
 
@@ -88,32 +91,32 @@ def markers(
     walls: Sequence[WallRecord], deleted: Iterable[int], stamp: float, frame: str = "map"
 ) -> bytes:
     """The CDR of a MarkerArray: an ADD for every wall record, a DELETE for every deleted id."""
-    marker_type = _T["visualization_msgs/msg/Marker"]
+    marker_type = _msg("visualization_msgs/msg/Marker")
     out = []
     for wall in walls:
         points = [_point(x, y) for seg in wall.segments for x, y in seg]
         out.append(_marker(wall.id, marker_type.ADD, points, stamp, frame))
     out += [_marker(wall_id, marker_type.DELETE, [], stamp, frame) for wall_id in deleted]
-    message = _T["visualization_msgs/msg/MarkerArray"](markers=out)
-    return bytes(STORE.serialize_cdr(message, "visualization_msgs/msg/MarkerArray"))
+    message = _msg("visualization_msgs/msg/MarkerArray")(markers=out)
+    return bytes(ros2_typestore().serialize_cdr(message, "visualization_msgs/msg/MarkerArray"))
 
 
 def path(trajectory: Sequence[Sequence[float]], stamp: float, frame: str = "map") -> bytes:
     """The CDR of a Path through the keyframes ``[[stamp, x, y, yaw], …]``."""
     poses = []
     for t, x, y, yaw in trajectory:
-        orientation = _T["geometry_msgs/msg/Quaternion"](
+        orientation = _msg("geometry_msgs/msg/Quaternion")(
             x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)
         )
-        pose = _T["geometry_msgs/msg/Pose"](position=_point(x, y), orientation=orientation)
-        poses.append(_T["geometry_msgs/msg/PoseStamped"](header=_header(t, frame), pose=pose))
-    message = _T["nav_msgs/msg/Path"](header=_header(stamp, frame), poses=poses)
-    return bytes(STORE.serialize_cdr(message, "nav_msgs/msg/Path"))
+        pose = _msg("geometry_msgs/msg/Pose")(position=_point(x, y), orientation=orientation)
+        poses.append(_msg("geometry_msgs/msg/PoseStamped")(header=_header(t, frame), pose=pose))
+    message = _msg("nav_msgs/msg/Path")(header=_header(stamp, frame), poses=poses)
+    return bytes(ros2_typestore().serialize_cdr(message, "nav_msgs/msg/Path"))
 
 
 def decode(payload: bytes, msgtype: str) -> Any:
     """A published payload back as a rosbags message (for tests and tools)."""
-    return STORE.deserialize_cdr(payload, msgtype)
+    return ros2_typestore().deserialize_cdr(payload, msgtype)
 
 
 class MarkerState:

@@ -6,18 +6,20 @@ old format, a damaged index, a chunk that does not decode, even AssertionError).
 `PlayerError` from either.
 """
 
+from __future__ import annotations
+
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
-
+from wallmap.common.ros2_types import ros2_typestore
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
 
 BAG_FORMS = "a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml, or a ROS 2 .mcap file"
 # rosbags picks the format from the file name, so the suffix has to match the contents.
@@ -131,7 +133,9 @@ class BagFile:
         self.path = Path(path)
         _check_path(self.path)
         # The default typestore only serves ROS 2 bags recorded without type definitions.
-        self.reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        from rosbags.highlevel import AnyReader  # noqa: PLC0415 - for processes that read bags
+
+        self.reader = AnyReader([self.path], default_typestore=ros2_typestore())
         try:
             self.reader.open()
         except Exception as err:  # a damaged bag fails in many ways (even AssertionError)

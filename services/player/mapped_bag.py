@@ -14,14 +14,16 @@ import heapq
 import mmap
 import struct
 from collections.abc import Iterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1.reader import decompressors
 
 from wallmap.services.player.errors import PlayerError
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
 
 _UINT32 = struct.Struct("<L")
 _MSGDATA, _CONNECTION = b"\x02", b"\x07"  # record "op" codes of the bag format 2.0

@@ -19,7 +19,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, UnidentifiedImageError
 
 from wallmap.common.messages import Pose
 from wallmap.common.scan_row import RowSelection
@@ -82,6 +81,8 @@ def read_depth_list(path: Path) -> list[tuple[float, Path]]:
 
 def read_depth_png(path: Path, scale: float) -> np.ndarray:
     """A 16-bit PNG depth map as float32 metres (NaN for no return); PlayerError if not one."""
+    from PIL import Image, UnidentifiedImageError  # noqa: PLC0415 - TUM folders only
+
     try:
         with Image.open(path) as image:
             if image.mode not in _GRAY_16:
