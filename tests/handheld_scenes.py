@@ -11,7 +11,14 @@ from pathlib import Path
 
 from wallmap.config import configured
 from wallmap.evaluation import MapScore, evaluate_map
-from wallmap.scene import SCENE_KINDS, Camera, Handheld, SceneInfo, write_handheld_recording
+from wallmap.scene import (
+    SCENE_KINDS,
+    Camera,
+    Handheld,
+    SceneInfo,
+    carry_camera,
+    write_handheld_recording,
+)
 
 SEED = 41
 CAMERA = Camera(width=128, height=96)
@@ -26,13 +33,13 @@ TUM = configured(  # how to read the TUM folder: its camera and depth units
 def write_all(folder: Path) -> dict[str, SceneInfo]:
     """The kitchen recorded as a 6-DoF tf bag, a robot's bag and a TUM folder."""
     plan = SCENE_KINDS["kitchen"].plan(SEED)
-    made = {}
-    for style in STYLES:
-        path = folder / (style if style == "tum" else f"{style}.bag")
-        made[style] = write_handheld_recording(
-            path, seed=SEED, n_frames=500, style=style, plan=plan, handheld=HANDHELD, camera=CAMERA
+    take = carry_camera(seed=SEED, n_frames=500, plan=plan, handheld=HANDHELD, camera=CAMERA)
+    return {
+        style: write_handheld_recording(
+            folder / (style if style == "tum" else f"{style}.bag"), take, style
         )
-    return made
+        for style in STYLES
+    }
 
 
 def score(info: SceneInfo, reply_walls) -> MapScore:

@@ -5,7 +5,7 @@ The user's layout keeps ``common/`` and ``services/`` at the top of the checkout
 reaches them through the links ``wallmap/common`` and ``wallmap/services``, and the editable
 install is a plain path (no import hook), so an IDE's go-to-definition and a static analyser
 follow every import. basedpyright runs here with type checking off and only unresolved imports
-as errors.
+as errors, on every import statement of the package.
 """
 
 from __future__ import annotations
@@ -61,12 +61,33 @@ def test_services_import_no_command_or_tool() -> None:
     assert not offenders, sorted(offenders)
 
 
+def _import_statements(path: Path) -> set[str]:
+    """Every absolute import statement of a file, one name each (``from a import b``)."""
+    lines = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            lines |= {f"import {alias.name}" for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module != "__future__":
+            lines |= {f"from {node.module} import {alias.name}" for alias in node.names}
+    return lines
+
+
 def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
+    """Every import statement of the package, gathered in one file the analyser checks.
+
+    Checking the package's 170 files themselves takes it 40 s with type checking off; which
+    imports resolve is the same from any file, as every one is absolute.
+    """
     exe = shutil.which("basedpyright", path=str(Path(sys.executable).parent))
     if exe is None:
         pytest.fail("basedpyright is missing: install the dev extra (make test does)")
+    sources = [f for name in ("common", "services", "wallmap") for f in (ROOT / name).rglob("*.py")]
+    statements = sorted(set().union(*map(_import_statements, sources)))
+    gathered = tmp_path / "every_import.py"
+    lines = [*statements, "import wallmap.common.no_such_module"]  # planted: it must be reported
+    gathered.write_text("\n".join(lines) + "\n")
     config = {
-        "include": [str(ROOT / name) for name in ("common", "services", "wallmap")],
+        "include": [str(gathered)],
         "typeCheckingMode": "off",
         "reportMissingImports": "error",
         "venvPath": str(Path(sys.prefix).parent),
@@ -82,13 +103,13 @@ def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
     )
     report = json.loads(done.stdout)
     unresolved = [
-        f"{d['file']}:{d['range']['start']['line'] + 1}: {d['message']}"
+        lines[d["range"]["start"]["line"]]
         for d in report["generalDiagnostics"]
         if d.get("rule") == "reportMissingImports"
     ]
-    assert report["summary"]["filesAnalyzed"] > 50
-    assert not unresolved, unresolved
-    assert report["summary"]["errorCount"] == 0, report["generalDiagnostics"][:5]
+    assert len(statements) > 300
+    assert unresolved == [lines[-1]], unresolved
+    assert report["summary"]["errorCount"] == 1, report["generalDiagnostics"][:5]
 
 
 def test_no_function_in_common_or_services_is_longer_than_60_lines() -> None:

@@ -35,7 +35,13 @@ from wallmap.scene.floorplan import (
     smooth_route,
     with_counters,
 )
-from wallmap.scene.handheld import Handheld, HandheldStyle, write_handheld_recording
+from wallmap.scene.handheld import (
+    Handheld,
+    HandheldStyle,
+    HandheldTake,
+    carry_camera,
+    write_handheld_recording,
+)
 from wallmap.scene.kinds import SCENE_KINDS, SceneKind
 from wallmap.scene.pose_faults import Glitch, PoseFaults
 from wallmap.scene.render import (
@@ -80,6 +86,7 @@ __all__ = [
     "Glitch",
     "Handheld",
     "HandheldStyle",
+    "HandheldTake",
     "Layout",
     "PoseFaults",
     "Scanner",
@@ -88,6 +95,7 @@ __all__ = [
     "SensorKind",
     "Trajectory",
     "Wall",
+    "carry_camera",
     "clearance",
     "depth_to_points",
     "drifting_odometry",

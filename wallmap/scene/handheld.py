@@ -51,11 +51,13 @@ from wallmap.scene.bags import (
 )
 from wallmap.scene.floorplan import FloorPlan
 from wallmap.scene.render import Camera, render_depth, walls_seen
-from wallmap.scene.trajectory import generate_trajectory
+from wallmap.scene.trajectory import Trajectory, generate_trajectory
 
 HandheldStyle = Literal["camera", "robot", "tum"]
 MAP_FRAME, BASE_FRAME = "map", "base_link"
 SEEN_BAND = (0.9, 1.6)  # m: where a handheld camera's walls are looked for (the truth's counts)
+LINK_OPTICAL = np.eye(4)  # T_camera_link_optical: the optical frame's axes (z forward)
+LINK_OPTICAL[:3, :3] = rotation_matrix(OPTICAL_QUATERNION)
 
 
 @dataclass(frozen=True)
@@ -104,76 +106,102 @@ class Handheld:
         return pose_matrix(0.0, 0.0, height, roll, -pitch, 0.0)
 
 
-def write_handheld_recording(
-    path: str | Path,
+Frames = list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]  # stamp, depth, mount, pose
+
+
+@dataclass(frozen=True)
+class HandheldTake:
+    """A camera carried through a scene and rendered once: each style writes the same frames.
+
+    Attributes:
+        seed: The scene's seed.
+        plan: The scene.
+        hand: How the camera was carried.
+        camera: The camera.
+        rate_hz: Frames per second.
+        truth: The floor poses under the camera, one per frame.
+        frames: Per frame: stamp, depth, T_base_camera_link, the camera link in the recorded frame.
+        seen_counts: Per wall, the frames in which it was seen in ``SEEN_BAND``.
+    """
+
+    seed: int
+    plan: FloorPlan
+    hand: Handheld
+    camera: Camera
+    rate_hz: float
+    truth: Trajectory
+    frames: Frames
+    seen_counts: dict[int, int]
+
+
+def carry_camera(
     *,
     seed: int,
     n_frames: int,
-    style: HandheldStyle,
     plan: FloorPlan,
     handheld: Handheld | None = None,
     camera: Camera | None = None,
     rate_hz: float = 15.0,
+) -> HandheldTake:
+    """Carry a camera through a scene and render what it sees (``write_handheld_recording``)."""
+    hand = handheld or Handheld()
+    camera = camera or Camera()
+    traj_seed, noise_seed, phase_seed = sub_seeds(seed, 3)
+    route = generate_trajectory(plan, traj_seed, rate_hz=rate_hz)
+    truth = route.sliced(slice(0, min(n_frames, len(route))))
+    rng = np.random.default_rng(noise_seed)
+    phase = np.random.default_rng(phase_seed).uniform(0, 2 * math.pi, 3)
+    recorded_from_map = hand.frame_from_map()
+    seen_counts = {w.id: 0 for w in plan.walls}
+    frames = []
+    for k in range(len(truth.stamps)):
+        t = float(truth.stamps[k] - truth.stamps[0])
+        mount = hand.mount(t, phase)
+        depth, hit_wall = render_depth(plan, *truth.pose_at(k), camera, rng, mount @ LINK_OPTICAL)
+        for wall_id in walls_seen(hit_wall, depth, camera, z_band=SEEN_BAND,
+                                  mount=mount @ LINK_OPTICAL):  # fmt: skip
+            seen_counts[wall_id] += 1
+        map_link = planar_matrix(*truth.pose_at(k)) @ mount
+        frames.append((float(truth.stamps[k]), depth, mount, recorded_from_map @ map_link))
+    return HandheldTake(seed, plan, hand, camera, rate_hz, truth, frames, seen_counts)
+
+
+def write_handheld_recording(
+    path: str | Path, take: HandheldTake, style: HandheldStyle
 ) -> SceneInfo:
-    """Carry a camera through a scene and record it the ``style`` way, with the truth beside it.
+    """Record a take the ``style`` way, with the truth beside it.
 
     The truth (``<path>.truth.json``) has the plan in the level map frame, the floor poses
     under the camera and, per wall, the frames in which it was seen in ``SEEN_BAND``.
     """
     path = Path(path)
-    hand = handheld or Handheld()
-    camera = camera or Camera()
-    traj_seed, noise_seed, phase_seed = sub_seeds(seed, 3)
-    route = generate_trajectory(plan, traj_seed, rate_hz=rate_hz)
-    n_frames = min(n_frames, len(route))
-    truth = route.sliced(slice(0, n_frames))
-    rng = np.random.default_rng(noise_seed)
-    phase = np.random.default_rng(phase_seed).uniform(0, 2 * math.pi, 3)
-    recorded_from_map = hand.frame_from_map()
-    link_optical = np.eye(4)
-    link_optical[:3, :3] = rotation_matrix(OPTICAL_QUATERNION)
-    seen_counts = {w.id: 0 for w in plan.walls}
-    frames = []
-    for k in range(n_frames):
-        t = float(truth.stamps[k] - truth.stamps[0])
-        mount = hand.mount(t, phase)
-        depth, hit_wall = render_depth(plan, *truth.pose_at(k), camera, rng, mount @ link_optical)
-        for wall_id in walls_seen(hit_wall, depth, camera, z_band=SEEN_BAND,
-                                  mount=mount @ link_optical):  # fmt: skip
-            seen_counts[wall_id] += 1
-        map_link = planar_matrix(*truth.pose_at(k)) @ mount
-        frames.append((float(truth.stamps[k]), depth, mount, recorded_from_map @ map_link))
     if style == "tum":
-        _write_tum(path, frames, link_optical)
+        _write_tum(path, take.frames)
     else:
-        _write_bag(path, frames, truth, camera, style)
+        _write_bag(path, take.frames, take.camera, style)
     truth_path = truth_path_for(path)
+    n_frames = len(take.frames)
     truth_path.write_text(
         json.dumps(
             {
-                "seed": seed,
+                "seed": take.seed,
                 "format": style,
                 "sensor": "depth16",
-                "rate_hz": rate_hz,
+                "rate_hz": take.rate_hz,
                 "n_frames": n_frames,
-                "camera": camera.to_json(),
-                "handheld": asdict(hand),
-                "plan": plan.to_json(),
-                "trajectory": truth.to_json(),
-                "stamps_ns": [stamp_to_ns(s) for s in truth.stamps],
-                "seen_counts": {str(k): v for k, v in seen_counts.items()},
+                "camera": take.camera.to_json(),
+                "handheld": asdict(take.hand),
+                "plan": take.plan.to_json(),
+                "trajectory": take.truth.to_json(),
+                "stamps_ns": [stamp_to_ns(s) for s in take.truth.stamps],
+                "seen_counts": {str(k): v for k, v in take.seen_counts.items()},
             }
         )
     )
-    return SceneInfo(path, truth_path, n_frames, plan, truth, seen_counts)
+    return SceneInfo(path, truth_path, n_frames, take.plan, take.truth, dict(take.seen_counts))
 
 
-Frames = list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]  # stamp, depth, mount, pose
-
-
-def _write_bag(
-    path: Path, frames: Frames, truth: object, camera: Camera, style: HandheldStyle
-) -> None:
+def _write_bag(path: Path, frames: Frames, camera: Camera, style: HandheldStyle) -> None:
     with BagSink(path, "ros1", compress=True) as sink:
         static = sink.topic(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True)
         tf = sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage")
@@ -206,7 +234,7 @@ def _edge(sink: BagSink, stamp_ns: int, parent: str, child: str, matrix: np.ndar
     return transform_stamped(sink, TF_TOPIC, stamp_ns, parent, child, xyz, rotation)
 
 
-def _write_tum(path: Path, frames: Frames, link_optical: np.ndarray) -> None:
+def _write_tum(path: Path, frames: Frames) -> None:
     (path / "depth").mkdir(parents=True)
     listing = ["# depth maps (16-bit PNG, millimetres)", "# timestamp filename"]
     trajectory = ["# the optical frame in the recorded frame", "# timestamp tx ty tz qx qy qz qw"]
@@ -215,7 +243,7 @@ def _write_tum(path: Path, frames: Frames, link_optical: np.ndarray) -> None:
         millimetres = np.clip(np.nan_to_num(np.round(depth * 1000.0)), 0, 65535).astype(np.uint16)
         Image.fromarray(millimetres).save(path / name)
         listing.append(f"{stamp:.6f} {name}")
-        pose = recorded_link @ link_optical
+        pose = recorded_link @ LINK_OPTICAL
         qx, qy, qz, qw = quaternion_from_matrix(pose[:3, :3])
         x, y, z = pose[:3, 3]
         trajectory.append(
