@@ -101,6 +101,19 @@ def line_jacobian(s: Array) -> Array:
     return np.column_stack([n, rho * wall_model.direction(s)])
 
 
+def line_spread(s: Array, sd: tuple[float, float]) -> Array:
+    """The covariance a line's offset and angle standard deviations give its closest point.
+
+    ``J diag(sd^2) J^T`` with ``J = line_jacobian(s)``, for one closest point (2,) or many
+    (n, 2) at once: ``sd[0]^2 n n^T + (rho sd[1])^2 d d^T``, the normal ``n``, the direction ``d``.
+    """
+    rho = np.linalg.norm(s, axis=-1, keepdims=True)
+    n = s / rho
+    d = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+    across, turn = n * sd[0], d * (rho * sd[1])
+    return across[..., :, None] * across[..., None, :] + turn[..., :, None] * turn[..., None, :]
+
+
 def line_agreement(
     s_a: Array,
     p_a: Array,
@@ -120,10 +133,8 @@ def line_agreement(
     at_a = np.array([anchor_a[0], anchor_a[1], 0.0])
     z = wall_model.predict(s_b, anchor_b, at_a)
     j = wall_model.jacobian_state(s_b, anchor_b, at_a)
-    lines = line_jacobian(s_a)
-    spread = lines @ np.diag(np.square(floor)) @ lines.T
     d = s_a - z
-    return float(d @ np.linalg.solve(p_a + j @ p_b @ j.T + spread, d))
+    return float(d @ np.linalg.solve(p_a + j @ p_b @ j.T + line_spread(s_a, floor), d))
 
 
 def initial_state(z: Array, r: Array, pose: Array, pose_cov: Array) -> tuple[Array, Array, Array]:

@@ -56,9 +56,9 @@ def line_turn(before: Array, after: Array) -> float | None:
     d0, d1 = np.hypot(before[:, 0], before[:, 1]), np.hypot(after[:, 0], after[:, 1])
     turn = (a1[:, None] - a0[None, :] + math.pi) % (2 * math.pi) - math.pi
     close = (np.abs(turn) <= MATCH_ANGLE) & (np.abs(d1[:, None] - d0[None, :]) <= MATCH_OFFSET)
-    turns = [turn[i, np.argmin(np.where(close[i], np.abs(turn[i]), np.inf))]
-             for i in range(len(after)) if close[i].any()]  # fmt: skip
-    return -float(np.median(turns)) if turns else None
+    nearest = np.argmin(np.where(close, np.abs(turn), np.inf), axis=1)
+    turns = turn[np.arange(len(after)), nearest][close.any(axis=1)]
+    return -float(np.median(turns)) if len(turns) else None
 
 
 def _chained(turns: Array) -> tuple[Array, Array, Array]:

@@ -137,8 +137,7 @@ class PoseCorrector:
     def _softened(self, obs: WallObservation) -> WallObservation:
         """``obs`` turned about its foot by ``end_sd`` over its length, one standard deviation."""
         length = max(float(np.linalg.norm(obs.p1 - obs.p0)), 0.05)
-        lines = ekf.line_jacobian(obs.closest)
-        extra = lines @ np.diag([0.0, (self.config.end_sd / length) ** 2]) @ lines.T
+        extra = ekf.line_spread(obs.closest, (0.0, self.config.end_sd / length))
         return replace(obs, cov=obs.cov + extra)
 
     def _associate(self, obs: WallObservation, wall_map: WallMap) -> tuple[Wall | None, bool]:

@@ -81,23 +81,17 @@ def candidates(frame: Observations, pose: Array, wall_map: WallMap, min_obs: int
     """
     rows = []
     cfg = wall_map.config
-    floor = np.diag(np.square(cfg.line_floor))
-    widened: dict[int, Array | None] = {}  # per wall, once a frame: most are near several lines
     for i, obs in enumerate(frame.walls):
         for wall in wall_map.near_observation(obs, pose):
-            if wall.id not in widened:
-                settled = wall.n_obs >= min_obs and wall.confirmed(cfg)
-                lines = ekf.line_jacobian(wall.s) if settled else None
-                widened[wall.id] = None if lines is None else wall.p + lines @ floor @ lines.T
-            p = widened[wall.id]
-            if p is not None:
-                rows.append((i, wall.id, obs.closest, obs.cov, wall.s, wall.anchor, p))
+            if wall.n_obs >= min_obs and wall.confirmed(cfg):
+                rows.append((i, wall.id, obs.closest, obs.cov, wall.s, wall.anchor, wall.p))
     if not rows:
         e2, e22 = np.zeros((0, 2)), np.zeros((0, 2, 2))
         return Candidates(np.zeros(0, dtype=int), [], e2, e22, e2, e2, e22)
     obs_index, ids, z, r, s, anchor, p = zip(*rows, strict=True)
-    arrays = (np.array(a) for a in (z, r, s, anchor, p))
-    return Candidates(np.array(obs_index), list(ids), *arrays)
+    z, r, s, anchor, p = (np.array(a) for a in (z, r, s, anchor, p))
+    p = p + ekf.line_spread(s, cfg.line_floor)
+    return Candidates(np.array(obs_index), list(ids), z, r, s, anchor, p)
 
 
 def associate(

@@ -154,6 +154,15 @@ def test_the_line_jacobian_matches_numeric_differentiation():
         np.testing.assert_allclose(ekf.line_jacobian(s), numeric, atol=1e-6)
 
 
+def test_a_line_s_spread_is_its_jacobian_s_at_once_for_many():
+    rng = np.random.default_rng(5)
+    s = rng.uniform(-5.0, 5.0, (20, 2))
+    sd = (0.01, 0.02)
+    one_by_one = [ekf.line_jacobian(x) @ np.diag(np.square(sd)) @ ekf.line_jacobian(x).T for x in s]
+    np.testing.assert_allclose(ekf.line_spread(s, sd), one_by_one, atol=1e-15)
+    np.testing.assert_allclose(ekf.line_spread(s[3], sd), one_by_one[3], atol=1e-15)
+
+
 def test_two_estimates_of_one_line_agree_and_of_two_lines_do_not():
     """The same line estimated from anchors 6 m apart, against one 5 cm or 2 degrees off."""
     anchor_a, anchor_b = np.array([0.0, -1.0]), np.array([6.0, -1.5])
