@@ -17,12 +17,22 @@ import numpy as np
 SCHEMA_VERSION = 1
 # Whole 1280x720 clouds are 11 MB; anything far larger is a mistake or an attack.
 MAX_PAYLOAD_BYTES = 64 * 1024 * 1024
+# A map coordinate or distance beyond this (m) is no building's: refused, also because the
+# geometry would square it into an overflow.
+MAX_COORDINATE = 1e6
 _ND = "__nd__"
 _ALLOWED_DTYPES = frozenset({"<f4", "<f8", "<i4", "<i8", "<u2", "|u1", "|i1", "<u4"})
 
 
 class MessageError(ValueError):
     """A payload that cannot be accepted; the message is the reason, for logs and counters."""
+
+
+def check_coordinates(values: Any, what: str) -> None:
+    """MessageError if any of ``values`` (finite numbers, any shape) is beyond MAX_COORDINATE."""
+    if float(np.max(np.abs(values), initial=0.0)) > MAX_COORDINATE:
+        msg = f"{what} lies beyond {MAX_COORDINATE:.0e} m of the origin"
+        raise MessageError(msg)
 
 
 def _pack_default(obj: object) -> object:

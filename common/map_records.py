@@ -16,7 +16,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from wallmap.common.codec import MessageError
+from wallmap.common.codec import MessageError, check_coordinates
 
 Point = tuple[float, float]
 Segment = tuple[Point, Point]
@@ -137,6 +137,8 @@ class WallRecord:
             raise MessageError(f"wall record lacks {err}") from None
         if not isinstance(record.tentative, bool):
             raise MessageError("field 'tentative' must be true or false")
+        ends = [record.p0, record.p1, *(end for segment in record.segments for end in segment)]
+        check_coordinates([(record.u, record.v), *ends], "a wall")
         return record
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common import se2
-from wallmap.common.codec import MessageError, decode, encode
+from wallmap.common.codec import MessageError, check_coordinates, decode, encode
 from wallmap.common.pose3d import pose_matrix, rpy_from_quaternion
 
 Array = NDArray[np.float64]
@@ -341,18 +341,21 @@ class WallObservation:
         """Validate and build; raises MessageError."""
         m = _require_map(m)
         closest = np.array([_finite(m, "u"), _finite(m, "v")])
-        if closest @ closest < 1e-6:
+        check_coordinates(closest, "the wall's closest point (u, v)")
+        if math.hypot(*closest) < 1e-3:
             msg = "wall passes through the sensor (u = v = 0)"
             raise MessageError(msg)
         cov = _covariance(_get(m, "cov"), 2, "cov")
         if np.linalg.det(cov) <= 0.0:
             msg = "field 'cov' is singular"
             raise MessageError(msg)
+        p0, p1 = _matrix(_get(m, "p0"), (2,), "p0"), _matrix(_get(m, "p1"), (2,), "p1")
+        check_coordinates([p0, p1], "a segment end (p0, p1)")
         return cls(
             closest=closest,
             cov=cov,
-            p0=_matrix(_get(m, "p0"), (2,), "p0"),
-            p1=_matrix(_get(m, "p1"), (2,), "p1"),
+            p0=p0,
+            p1=p1,
             n_points=_int(m, "n_points"),
             rms=_finite(m, "rms"),
         )

@@ -2,6 +2,7 @@
 
 import contextlib
 import math
+from dataclasses import replace
 
 import msgpack
 import numpy as np
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 
 from wallmap.common import codec
 from wallmap.common.codec import MessageError
+from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import (
     Frame,
     Observations,
@@ -53,6 +55,20 @@ def test_pose_and_observations_round_trip():
     )
     obs = Observations("r", 1, 2.0, "base_link", [wall])
     assert unpack_observations(pack(obs)).to_map() == obs.to_map()
+
+
+def test_walls_beyond_any_building_are_refused_without_overflowing() -> None:
+    wall = WallObservation(np.array([1e200, 1e200]), np.eye(2), np.zeros(2), np.ones(2), 30, 0.01)
+    far_end = replace(wall, closest=np.array([1.0, 2.0]), p1=np.array([0.0, -2e6]))
+    record = WallRecord(0, 1.0, 2.0, ((1e-4, 0.0), (0.0, 1e-4)), (0.0, 0.0), (1e300, 0.0),
+                        (((0.0, 0.0), (1e300, 0.0)),), 10)  # fmt: skip
+    with np.errstate(all="raise"):
+        for bad in (wall, far_end):
+            obs = Observations("r", 1, 2.0, "base_link", [bad])
+            with pytest.raises(MessageError, match="beyond 1e\\+06 m"):
+                unpack_observations(pack(obs))
+        with pytest.raises(MessageError, match="a wall lies beyond"):
+            WallRecord.from_map(record.to_map())
 
 
 @pytest.mark.parametrize(
