@@ -347,6 +347,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = resolve(args.config, args.sets, given(args, args.options))
         return func(args, config)
+    except BrokenPipeError:  # `wallmap query | head -1`: the reader has all it wanted
+        # Python would flush stdout again at exit, into the closed pipe, and complain.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except FAILURES as err:
         print(f"wallmap {args.command}: error: {err}", file=sys.stderr)
         return 1

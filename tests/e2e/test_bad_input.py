@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -153,3 +154,14 @@ def test_bad_zenoh_config_is_one_line(tmp_path):
     assert_one_line_error(out, "query", "z.json5")
     out = run_wallmap("query", "--zenoh-config", str(Path(tmp_path / "absent.json5")), expect=1)
     assert_one_line_error(out, "query", "does not exist")
+
+
+def test_a_closed_pipe_is_no_error() -> None:
+    """`wallmap config | head -1`: the reader went away before the output; exit 0, silently."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wallmap", "config"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()  # before it writes: its first write meets a closed pipe
+    _, err = proc.communicate(timeout=60)
+    assert (proc.returncode, err.decode()) == (0, "")
