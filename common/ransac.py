@@ -19,10 +19,44 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common.config_file import require
 from wallmap.common.line_fit import LineFit, bend_split, fit_line, line_through
 
 Array = NDArray[np.float64]
 SCORED_POINTS = 256  # hypotheses are scored on about this many points of a cluster
+
+
+# The rule each tuning value is held to, from a flag, --set or a file alike.
+_RULES = [
+    *(
+        (name, "positive", lambda x: x > 0)
+        for name in (
+            "inlier_min",
+            "inlier_sigmas",
+            "noise_scale",
+            "max_gap",
+            "sigma_floor",
+            "cov_scale",
+            "split_f",
+            "max_angle_sd",
+            "lone_angle_sd",
+            "max_jump",
+        )
+    ),
+    *(
+        (name, ">= 0", lambda x: x >= 0)
+        for name in (
+            "noise_k",
+            "min_length",
+            "lone_length",
+            "corner_reach",
+            "corner_angle",
+            "nan_run",
+        )
+    ),
+    *((name, ">= 1", lambda x: x >= 1) for name in ("iterations", "max_lines")),
+    ("min_points", ">= 2", lambda x: x >= 2),
+]
 
 
 @dataclass(frozen=True)
@@ -81,6 +115,11 @@ class RansacParams:
     corner_angle: float = np.radians(3.0)
     nan_run: int = 0
     max_jump: float = math.inf
+
+    def __post_init__(self) -> None:
+        for name, rule, ok in _RULES:
+            require(ok(getattr(self, name)), name, rule, getattr(self, name))
+        require(0 < self.lone_share <= 1, "lone_share", "within (0, 1]", self.lone_share)
 
 
 def split_at_nans(

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
+
+PICTURE_SUFFIXES = (".png", ".svg")  # what ``wallmap.plot.write_picture`` draws
 
 
 def positive(value: str) -> float:
@@ -79,3 +82,27 @@ def band(value: str) -> tuple[float, float]:
         msg = f"LOW must be below HIGH, got {value!r}"
         raise argparse.ArgumentTypeError(msg)
     return low, high
+
+
+def picture_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be a picture (.png or .svg, the two kinds ``wallmap.plot`` draws)."""
+    if path.suffix.lower() in PICTURE_SUFFIXES:
+        return None
+    return f"a picture is drawn as .png or .svg, not {path.suffix or 'a file without a suffix'}"
+
+
+def picture(value: str) -> Path:
+    """A picture's file name (``picture_problem``)."""
+    problem = picture_problem(Path(value))
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return Path(value)
+
+
+def positive_int(value: str) -> int:
+    """A whole number > 0 (a size in pixels)."""
+    number = int(value)
+    if number <= 0:
+        msg = f"must be a whole number > 0, got {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return number

@@ -19,7 +19,7 @@ from typing import NoReturn
 import zenoh
 
 from wallmap import __version__
-from wallmap.arg_types import finite, non_negative, positive
+from wallmap.arg_types import finite, non_negative, picture, positive, positive_int
 from wallmap.common.delivery import StalledError
 from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.map_records import MapReply
@@ -248,7 +248,11 @@ def _add_bag_argument(p: argparse.ArgumentParser) -> None:
 
 def _add_map_filters(p: argparse.ArgumentParser, *, min_obs: int = 1) -> None:
     p.add_argument(
-        "--min-obs", type=int, default=min_obs, metavar="N", help="walls seen at least N times"
+        "--min-obs",
+        type=positive_int,
+        default=min_obs,
+        metavar="N",
+        help="walls seen at least N times",
     )
     p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
     p.add_argument("--timeout", type=positive, default=5.0, help="seconds to wait for the mapper")
@@ -292,8 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_argument(p)
 
     p = add_command(sub, "plot", "draw the current map (.png or .svg)", _cmd_plot, ZENOH)
-    p.add_argument("out", type=Path, metavar="OUT", help="output file")
-    p.add_argument("--size", type=int, default=1000, help="longer side in pixels")
+    p.add_argument("out", type=picture, metavar="OUT", help="output file, .png or .svg")
+    p.add_argument("--size", type=positive_int, default=1000, help="longer side in pixels")
     _add_map_filters(p)
     p = add_command(sub, "export", "the map as GeoJSON", _cmd_export, ZENOH)
     p.add_argument("out", type=Path, metavar="OUT", help="output file")

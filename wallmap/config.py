@@ -26,8 +26,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from wallmap.arg_types import PICTURE_SUFFIXES
 from wallmap.common import config_file
-from wallmap.common.config_file import Tree
+from wallmap.common.config_file import Tree, require
 from wallmap.common.delivery import History
 from wallmap.common.transport import ZenohSettings
 from wallmap.services.detector.detector import DetectorConfig
@@ -61,6 +62,12 @@ class UpSettings:
     json_out: Path | None = None
     picture: Path | None = None
     truth: Path | None = None
+
+    def __post_init__(self) -> None:
+        require(self.min_obs >= 1, "min_obs", ">= 1", self.min_obs)
+        if self.picture is not None:
+            suffix = Path(self.picture).suffix.lower()
+            require(suffix in PICTURE_SUFFIXES, "picture", ".png or .svg", str(self.picture))
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wallmap.arg_types import band, finite, intrinsics, non_negative, planar_pose, port, positive
+from wallmap.arg_types import (
+    band,
+    finite,
+    intrinsics,
+    non_negative,
+    picture,
+    planar_pose,
+    port,
+    positive,
+)
 from wallmap.common.config_file import Tree
 from wallmap.config import Config
 from wallmap.services.mapper.pose_input import FORMATS as POSE_FORMATS
@@ -236,7 +245,7 @@ ODOMETRY = (
 UP = (
     Option("--exit-when-done", "up.exit_when_done", "stop everything after the bag", const=True),
     Option("--json-out", "up.json_out", "write the final map as JSON", Path, metavar="FILE"),
-    Option("--picture", "up.picture", "draw the final map (.png or .svg)", Path, metavar="FILE"),
+    Option("--picture", "up.picture", "draw the final map (.png or .svg)", picture, metavar="FILE"),
     Option("--min-obs", "up.min_obs", "walls printed: seen N times", int, metavar="N"),
     Option("--truth", "up.truth", "score the map against a scene's truth", Path, metavar="FILE"),
     Option("--odometry", "up.odometry", "estimate the poses from the scans (wallmap odometry), "

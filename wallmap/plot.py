@@ -24,6 +24,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
+from wallmap.arg_types import picture_problem
 from wallmap.common.map_records import MapReply, WallRecord
 
 Array = np.ndarray
@@ -571,6 +572,9 @@ def write_picture(
     size: int = 1000,
     points: Array | None = None,
 ) -> None:
-    """PNG or SVG by the file's suffix (.png, else SVG), for commands taking one ``--out``."""
+    """PNG or SVG by the file's suffix, for commands taking one ``--out``; ValueError else."""
+    problem = picture_problem(Path(path))
+    if problem is not None:
+        raise ValueError(problem)
     writer = write_png if Path(path).suffix.lower() == ".png" else write_svg
     writer(path, reply, trajectory, size, points)

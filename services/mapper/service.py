@@ -94,6 +94,8 @@ class MapperSettings:
         require(self.pose_wait >= 0, "pose_wait", ">= 0", self.pose_wait)
         require(self.gap_wait >= 0, "gap_wait", ">= 0", self.gap_wait)
         require(self.save_every > 0, "save_every", "positive", self.save_every)
+        parent, _, child = self.pose_frames.partition(">")
+        require(bool(parent and child), "pose_frames", "PARENT>CHILD", self.pose_frames)
 
 
 class MapperCore:

@@ -119,6 +119,13 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["up", "x.bag", "--set", "player.rate=-1"], ["player: rate must be a positive"]),
         (["config", "--set", "history.seconds=0"], ["history: seconds must be a positive"]),
         (["config", "--set", "mapper.pose_wait=-1"], ["mapper: pose_wait must be >= 0"]),
+        (["detector", "--noise-k", "-1"], ["detector.ransac: noise_k must be >= 0"]),
+        (["mapper", "--pose-frames", "nope"], ["pose_frames must be PARENT>CHILD"]),
+        (["query", "--min-obs", "-1"], ["--min-obs", "whole number > 0"]),
+        (["plot", "map.jpg"], ["OUT", "a picture is drawn as .png or .svg, not .jpg"]),
+        (["plot", "map.png", "--size", "0"], ["--size", "whole number > 0"]),
+        (["up", "x.bag", "--picture", "map.bmp"], ["--picture", ".png or .svg, not .bmp"]),
+        (["up", "x.bag", "--set", "up.picture=map.jpg"], ["up: picture must be .png or .svg"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):

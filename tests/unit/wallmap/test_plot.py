@@ -224,6 +224,10 @@ def test_picture_by_suffix_and_trajectory_argument(tmp_path):
     assert any(e.get("class") == "trajectory" for e in root.iter(f"{SVG}polyline"))
     with pytest.raises(ValueError, match="trajectory"):
         plot.render_map(reply, trajectory=np.zeros((3, 3)))
+    for other in ("a.jpg", "a"):  # not an SVG under another name
+        with pytest.raises(ValueError, match=r"a picture is drawn as \.png or \.svg"):
+            plot.write_picture(tmp_path / other, reply)
+        assert not (tmp_path / other).exists()
 
 
 def test_empty_map_draws():
