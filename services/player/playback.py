@@ -73,10 +73,11 @@ class Playback:
             self._changed.notify_all()
 
     def status(self) -> dict[str, Any]:
-        """State for replies and progress messages."""
+        """State for replies and progress messages; a seek asked for is where it stands."""
         with self._changed:
             state = "paused" if self._paused else "playing"
-            return {"state": state, "rate": self._rate, "position": self._position}
+            position = self._position if self._seek is None else self._seek
+            return {"state": state, "rate": self._rate, "position": position}
 
     def wait_turn(self, position: float, stop: threading.Event) -> Turn:
         """Block until the frame at ``position`` (s from the bag's start) is due.

@@ -191,7 +191,7 @@ def _control(
                     playback.set_rate(float(params["x"]))
                 elif command != "status":
                     msg = (
-                        f"unknown cmd {command!r}: pause, resume, step, seek&t=S, rate&x=F, status"
+                        f"unknown cmd {command!r}: pause, resume, step, seek;t=S, rate;x=F, status"
                     )
                     raise ValueError(msg)
             except (KeyError, ValueError) as err:

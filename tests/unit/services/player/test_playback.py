@@ -59,3 +59,10 @@ def bag(tmp_path_factory):
     path = tmp_path_factory.mktemp("playback") / "s.bag"
     write_scene_bag(path, seed=11, n_frames=N_FRAMES, fmt="ros1", sensor="depth16")
     return path
+
+
+def test_a_seek_asked_for_is_the_position_the_reply_shows() -> None:
+    """The control query's reply to a seek: where playback goes, not the last frame sent."""
+    playback = Playback(fast=True, paused=True)
+    playback.seek(3.0)
+    assert playback.status()["position"] == 3.0
