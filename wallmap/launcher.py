@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from wallmap.common.map_query import MapQuery, fetch_map
 from wallmap.common.runtime import stop_on_signals
@@ -28,6 +29,11 @@ from wallmap.common.transport import Keys, ZenohSettings, make_config, open_sess
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
 from wallmap.map_client import format_table, to_json
 from wallmap.services.player.service import PlayerSettings
+
+if TYPE_CHECKING:
+    from wallmap.scene import FloorPlan, Trajectory
+
+    Truth = tuple[FloorPlan, Trajectory, dict[int, int]]  # a generated scene's (load_truth)
 
 STOP_TIMEOUT = 10.0  # s a service gets to save its state and exit after SIGTERM
 
@@ -131,6 +137,7 @@ def up(config: Config, bag: Path) -> int:
     """Run router, mapper, detector and player; print the map when the bag is done."""
     config = for_services(config)
     _check_endpoint(config.zenoh)
+    truth = _check_outputs(config.up, bag)
     env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
     env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
     stop = stop_on_signals()
@@ -152,7 +159,7 @@ def up(config: Config, bag: Path) -> int:
                 return 0  # asked to stop (Ctrl-C, SIGTERM): the services stop cleanly
             if player.returncode != 0:
                 return player.returncode
-            _report(config)
+            _report(config, truth)
             if not config.up.exit_when_done:
                 print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
                 stop.wait()
@@ -180,20 +187,40 @@ def _check_endpoint(settings: ZenohSettings) -> None:
             raise LaunchError(msg) from err
 
 
-def _report(config: Config) -> None:
+def _check_outputs(options: UpSettings, bag: Path) -> Truth | None:
+    """What ``up`` reads and writes, checked before anything starts; the truth, read.
+
+    A wrong path fails now, in one line, not after the whole recording has played.
+    """
+    if not bag.exists():
+        raise LaunchError(f"{bag} does not exist")
+    for path in (options.json_out, options.picture):
+        if path is not None and not path.parent.is_dir():
+            raise LaunchError(f"cannot write {path}: {path.parent} is not a folder")
+    if options.truth is None:
+        return None
+    from wallmap.scene import load_truth  # noqa: PLC0415 - see _report
+
+    try:
+        return load_truth(options.truth)
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        reason = err.strerror if isinstance(err, OSError) else f"not a scene's truth ({err})"
+        raise LaunchError(f"cannot read the ground truth {options.truth}: {reason}") from err
+
+
+def _report(config: Config, truth: Truth | None) -> None:
     """The final map: printed, scored, written as JSON (with the configuration), drawn."""
     # Scoring and drawing, imported here: every `wallmap` command would pay for them.
     from wallmap.evaluation import evaluate_map  # noqa: PLC0415 - see above
     from wallmap.plot import write_picture  # noqa: PLC0415 - see above
-    from wallmap.scene import load_truth  # noqa: PLC0415 - see above
 
     options = config.up
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)
         reply = fetch_map(session, Keys(config.zenoh.prefix), query)
     print(format_table(reply))
-    if options.truth:
-        plan, _, seen = load_truth(options.truth)
+    if truth is not None:
+        plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
     if options.json_out:
         options.json_out.write_text(to_json(reply, config=to_plain(config)), "utf-8")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import msgpack
 import pytest
-from conftest import free_port, run_wallmap
+from conftest import ROOT, free_port, run_wallmap
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -97,6 +97,9 @@ def test_corrupt_bag_is_one_line(tmp_path):
     assert "('" not in out.stderr, "the library's reason as words, not as a Python tuple"
 
 
+SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
+
+
 @pytest.mark.parametrize(
     ("args", "words"),
     [
@@ -126,6 +129,10 @@ def test_corrupt_bag_is_one_line(tmp_path):
         (["plot", "map.png", "--size", "0"], ["--size", "whole number > 0"]),
         (["up", "x.bag", "--picture", "map.bmp"], ["--picture", ".png or .svg, not .bmp"]),
         (["up", "x.bag", "--set", "up.picture=map.jpg"], ["up: picture must be .png or .svg"]),
+        (["up", "/nonexistent.bag"], ["/nonexistent.bag does not exist"]),
+        # checked before the services start, not after the recording has played
+        (["up", SAMPLE, "--truth", "/nonexistent.json"], ["cannot read the ground truth"]),
+        (["up", SAMPLE, "--json-out", "/nonexistent/map.json"], ["/nonexistent is not a folder"]),
     ],
 )
 def test_bad_flags_are_one_line(args, words):
