@@ -23,9 +23,15 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from wallmap.common.map_query import MapQuery, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.runtime import stop_on_signals
-from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
+from wallmap.common.transport import (
+    Keys,
+    TransportError,
+    ZenohSettings,
+    make_config,
+    open_session,
+)
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
 from wallmap.map_client import format_table, to_json
 from wallmap.services.player.service import PlayerSettings
@@ -65,7 +71,9 @@ class _Services:
         self._procs: list[tuple[str, subprocess.Popen[bytes]]] = []
 
     def start(self, name: str, *args: str) -> subprocess.Popen[bytes]:
-        proc = subprocess.Popen(_wallmap(*args), env=self._env)
+        # A group of its own: a terminal's Ctrl-C reaches ``up`` alone, which asks the mapper
+        # for the map so far before it stops them all (``_Services.stop``).
+        proc = subprocess.Popen(_wallmap(*args), env=self._env, process_group=0)
         self._procs.append((name, proc))
         return proc
 
@@ -155,8 +163,9 @@ def up(config: Config, bag: Path) -> int:
             while player.poll() is None and not stop.is_set():
                 procs.check_running()
                 stop.wait(0.1)
-            if stop.is_set():
-                return 0  # asked to stop (Ctrl-C, SIGTERM): the services stop cleanly
+            if stop.is_set():  # asked to stop (Ctrl-C, SIGTERM): the map so far, then stop
+                _report_partial(config, truth)
+                return 0
             if player.returncode != 0:
                 return player.returncode
             _report(config, truth)
@@ -208,8 +217,24 @@ def _check_outputs(options: UpSettings, bag: Path) -> Truth | None:
         raise LaunchError(f"cannot read the ground truth {options.truth}: {reason}") from err
 
 
-def _report(config: Config, truth: Truth | None) -> None:
-    """The final map: printed, scored, written as JSON (with the configuration), drawn."""
+def _report_partial(config: Config, truth: Truth | None) -> None:
+    """The map of a run stopped before its end, written as asked and marked partial.
+
+    A mapper that cannot answer (stopped before it started) leaves nothing to write: said in
+    one line.
+    """
+    try:
+        _report(config, truth, partial=True)
+    except (QueryError, TransportError) as err:
+        print(f"stopped before the mapper had a map to give ({err}): nothing written",
+              file=sys.stderr)  # fmt: skip
+
+
+def _report(config: Config, truth: Truth | None, *, partial: bool = False) -> None:
+    """The final map: printed, scored, written as JSON (with the configuration), drawn.
+
+    ``partial``: the run was stopped before the recording's end; the JSON says so.
+    """
     # Scoring and drawing, imported here: every `wallmap` command would pay for them.
     from wallmap.evaluation import evaluate_map  # noqa: PLC0415 - see above
     from wallmap.plot import write_picture  # noqa: PLC0415 - see above
@@ -218,12 +243,16 @@ def _report(config: Config, truth: Truth | None) -> None:
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)
         reply = fetch_map(session, Keys(config.zenoh.prefix), query)
+    if partial:
+        print(f"stopped before the end of the recording: the map of its first {reply.frames} "
+              "frames")  # fmt: skip
     print(format_table(reply))
     if truth is not None:
         plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
     if options.json_out:
-        options.json_out.write_text(to_json(reply, config=to_plain(config)), "utf-8")
+        document = to_json(reply, config=to_plain(config), partial=partial)
+        options.json_out.write_text(document, "utf-8")
     if options.picture:
         write_picture(options.picture, reply)
         print(f"picture: {options.picture}")

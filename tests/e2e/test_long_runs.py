@@ -9,6 +9,7 @@ restart silently freeze the map. Short runs and ``--fast`` never showed it.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -159,23 +160,32 @@ def test_a_service_waiting_for_its_router_stops_on_a_signal(
 
 
 def test_up_stopped_by_ctrl_c_stops_its_services_cleanly(long_bags, tmp_path) -> None:
+    """Ctrl-C as a terminal sends it, to the whole process group, mid-run: the services stop
+    cleanly, and the map so far is printed, written (--json-out, marked partial) and drawn."""
     scene = long_bags["mcap-depth"]
     log = tmp_path / "up.log"
+    out, picture = tmp_path / "map.json", tmp_path / "map.png"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with log.open("wb") as out:
+    with log.open("wb") as output:
         up = subprocess.Popen(
             [sys.executable, "-m", "wallmap", "up", str(scene.path), "--rate", "4",
-             "--connect", endpoint],
-            stdout=out, stderr=subprocess.STDOUT, env={**os.environ, "WALLMAP_LOG": "INFO"},
+             "--connect", endpoint, "--json-out", str(out), "--picture", str(picture)],
+            stdout=output, stderr=subprocess.STDOUT, env={**os.environ, "WALLMAP_LOG": "INFO"},
+            start_new_session=True,  # a terminal's group of its own: the signal goes to all in it
         )  # fmt: skip
         time.sleep(8.0)
-        up.send_signal(signal.SIGINT)
+        os.killpg(up.pid, signal.SIGINT)
         code = up.wait(timeout=60)
     output = log.read_text()
     assert_clean_exit("wallmap up", code, output, 0)
     for service in ("mapper", "detector"):
         assert f"{service}: stopping" in output, output
     assert "published" in output, "the player said what it played"
+    assert "stopped before the end of the recording" in output
+    document = json.loads(out.read_text())
+    assert document["partial"] is True
+    assert 0 < document["frames"] < scene.n_frames
+    assert picture.read_bytes().startswith(b"\x89PNG")
 
 
 def test_router_killed_and_restarted_in_real_time_the_map_goes_on(stack, long_bags) -> None:
