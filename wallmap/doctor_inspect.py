@@ -600,7 +600,7 @@ def inspect_tum(path: Path, source: SourceOptions) -> Report:
         "depth.txt", SENSOR_TYPE, "the folder's depth images", frames=len(stamps),
         rate_hz=round(1.0 / float(np.median(steps)), 3) if steps.size else None,
         frame_ids={OPTICAL_FRAME: len(stamps)},
-        geometry={"width": width, "height": height, "encoding": f"PNG / {source.depth_scale:g}"},
+        geometry={"width": width, "height": height, "encoding": f"PNG / {folder.depth_scale:g}"},
     )  # fmt: skip
     spec = str(folder.pose_spec)
     pose = PoseFacts(spec, default=True, available=folder.pose_spec.kind == "tum", player="ok")
@@ -609,7 +609,7 @@ def inspect_tum(path: Path, source: SourceOptions) -> Report:
         pose.frames_with_pose, pose.placement = posed, folder.placement.describe() or None
     report.poses, report.placement = [pose], pose.placement
     camera = ["--intrinsics", ",".join(f"{v:g}" for v in source.intrinsics)]
-    camera += ["--depth-scale", f"{source.depth_scale:g}"]
+    camera += ["--depth-scale", f"{folder.depth_scale:g}"]
     command = _up(str(path), *camera, *(() if pose.default else ("--pose-source", spec)))
     if not pose.available or not pose.frames_with_pose:
         report.verdict = Verdict("no-poses", f"no poses: give --pose-source tum:FILE (`{command}`)")

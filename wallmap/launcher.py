@@ -164,11 +164,11 @@ def up(config: Config, bag: Path) -> int:
                 procs.check_running()
                 stop.wait(0.1)
             if stop.is_set():  # asked to stop (Ctrl-C, SIGTERM): the map so far, then stop
-                _report_partial(config, truth)
+                _report_partial(config, bag, truth)
                 return 0
             if player.returncode != 0:
                 return player.returncode
-            _report(config, truth)
+            _report(config, bag, truth)
             if not config.up.exit_when_done:
                 print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
                 stop.wait()
@@ -217,20 +217,20 @@ def _check_outputs(options: UpSettings, bag: Path) -> Truth | None:
         raise LaunchError(f"cannot read the ground truth {options.truth}: {reason}") from err
 
 
-def _report_partial(config: Config, truth: Truth | None) -> None:
+def _report_partial(config: Config, bag: Path, truth: Truth | None) -> None:
     """The map of a run stopped before its end, written as asked and marked partial.
 
     A mapper that cannot answer (stopped before it started) leaves nothing to write: said in
     one line.
     """
     try:
-        _report(config, truth, partial=True)
+        _report(config, bag, truth, partial=True)
     except (QueryError, TransportError) as err:
         print(f"stopped before the mapper had a map to give ({err}): nothing written",
               file=sys.stderr)  # fmt: skip
 
 
-def _report(config: Config, truth: Truth | None, *, partial: bool = False) -> None:
+def _report(config: Config, bag: Path, truth: Truth | None, *, partial: bool = False) -> None:
     """The final map: printed, scored, written as JSON (with the configuration), drawn.
 
     ``partial``: the run was stopped before the recording's end; the JSON says so.
@@ -247,6 +247,11 @@ def _report(config: Config, truth: Truth | None, *, partial: bool = False) -> No
         print(f"stopped before the end of the recording: the map of its first {reply.frames} "
               "frames")  # fmt: skip
     print(format_table(reply))
+    if reply.frames and not reply.observations:
+        seen = f"no line was seen in any of the {reply.frames} frames"
+        why = "nothing in the band the detector reads, or the camera is read wrong"
+        ask = f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
+        print(f"wallmap up: {seen}: {why} {ask}", file=sys.stderr)
     if truth is not None:
         plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")

@@ -169,7 +169,8 @@ SOURCE = (
     Option("--intrinsics", "player.source.intrinsics", "a TUM folder's camera, pixels",
            intrinsics, metavar="FX,FY,CX,CY"),
     Option("--depth-scale", "player.source.depth_scale", "a TUM folder's depth units per metre "
-           "(1000 for millimetres)", positive, metavar="N"),
+           "(1000 for millimetres; default: millimetres if its depth.txt or its depths say so, "
+           "else TUM's 5000)", positive, metavar="N"),
 )  # fmt: skip
 
 PLAYER = (

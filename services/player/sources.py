@@ -10,7 +10,6 @@ from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.placement import LevelMode
 from wallmap.services.player.pose_sources import BAG_DEFAULT
 from wallmap.services.player.tum_folder import (
-    TUM_DEPTH_SCALE,
     TUM_INTRINSICS,
     TumFolder,
     is_tum_folder,
@@ -31,7 +30,8 @@ class SourceOptions:
         level: ``auto`` levels a fixed frame that is not level; ``none`` takes it as it is.
         floor_z: The floor's height in the fixed frame, instead of the one found.
         intrinsics: A TUM folder's camera (fx, fy, cx, cy), pixels.
-        depth_scale: A TUM folder's depth units per metre.
+        depth_scale: A TUM folder's depth units per metre; None: what the folder says
+            (``tum_folder.folder_depth_scale``).
     """
 
     sensor_topic: str | None = None
@@ -40,7 +40,7 @@ class SourceOptions:
     level: LevelMode = "auto"
     floor_z: float | None = None
     intrinsics: tuple[float, float, float, float] = TUM_INTRINSICS
-    depth_scale: float = TUM_DEPTH_SCALE
+    depth_scale: float | None = None
 
 
 def open_source(path: Path, options: SourceOptions | None = None) -> FrameSource:

@@ -3,9 +3,10 @@
 The TUM RGB-D benchmark's layout is how many RGB-D recordings are shared (TUM, ICL-NUIM, 7-Scenes
 converted, most SLAM systems' outputs): ``depth.txt`` lists ``timestamp path`` of 16-bit PNG depth
 images, ``groundtruth.txt`` is the camera's trajectory (``t x y z qx qy qz qw`` of its optical
-frame). Depths are integers, ``depth_scale`` per metre (5000 for TUM, 1000 for millimetres), 0
-for no return. The folder plays like a bag (``BagSource``'s interface), its poses are 6-DoF and
-describe the optical frame itself, so a frame's mount is the identity before levelling.
+frame). Depths are integers, ``depth_scale`` per metre (5000 for TUM, 1000 for millimetres, as
+the folder may say: ``folder_depth_scale``), 0 for no return. The folder plays like a bag
+(``BagSource``'s interface), its poses are 6-DoF and describe the optical frame itself, so a
+frame's mount is the identity before levelling.
 
 PNG decoding is Pillow's: it reads 16-bit grayscale exactly (checked against pypng, a pure-Python
 reader), 22 times faster (5 ms against 105 ms for a 640 x 480 image here), and is a 7 MB wheel
@@ -41,6 +42,8 @@ from wallmap.services.player.pose_sources import (
 
 TUM_INTRINSICS = (525.0, 525.0, 319.5, 239.5)  # TUM's default calibration (fx, fy, cx, cy)
 TUM_DEPTH_SCALE = 5000.0  # TUM depth PNGs: 5000 units per metre
+MILLIMETRES = 1000.0
+NEAREST_ROOM = 0.5  # m: a frame whose median depth is nearer is not a room seen in those units
 OPTICAL_FRAME = "camera_optical_frame"  # what a TUM trajectory describes
 SENSOR_TYPE = "TUM RGB-D depth (16-bit PNG)"
 POSE_TOLERANCE = 0.05  # s a depth stamp may lie outside the trajectory and still get its end
@@ -50,6 +53,27 @@ _GRAY_16 = ("I;16", "I;16L", "I;16B", "I")  # Pillow's modes of a 16-bit graysca
 def is_tum_folder(path: Path) -> bool:
     """Whether ``path`` is a folder in the TUM RGB-D layout (it has a ``depth.txt``)."""
     return path.is_dir() and (path / "depth.txt").is_file()
+
+
+def folder_depth_scale(path: Path, first_image: Path) -> tuple[float, str | None]:
+    """A TUM folder's depth units per metre when not given, and the note saying so.
+
+    ``depth.txt``'s header may say millimetres (as the RGB-D recordings written from ROS
+    drivers do); else TUM's 5000 per metre, unless that puts the first frame's surfaces nearer
+    than a room's (a median under ``NEAREST_ROOM``) while millimetres would not.
+    """
+    header = " ".join(line for line in path.read_text().splitlines() if line.startswith("#"))
+    if "millimet" in header.lower():
+        return MILLIMETRES, None
+    raw = read_depth_png(first_image, 1.0)
+    median = float(np.nanmedian(raw)) if np.isfinite(raw).any() else math.nan
+    if median / TUM_DEPTH_SCALE < NEAREST_ROOM <= median / MILLIMETRES:
+        return MILLIMETRES, (
+            f"depths taken as millimetres: at TUM's {TUM_DEPTH_SCALE:g} per metre the first "
+            f"frame would see everything within {median / TUM_DEPTH_SCALE:.2f} m "
+            "(--depth-scale N says otherwise)"
+        )
+    return TUM_DEPTH_SCALE, None
 
 
 def read_depth_list(path: Path) -> list[tuple[float, Path]]:
@@ -108,6 +132,7 @@ class TumFolder(ClosingSource):
         sensor_type: What the frames are.
         pose_spec: The pose source (default: the folder's ``groundtruth.txt``).
         base_frame: The frame the poses describe: the camera's optical frame.
+        depth_scale: The depth images' units per metre: as given, else ``folder_depth_scale``.
         warnings: Assumptions made while opening, for the CLI to log.
         placement: How frames are placed: the levelled fixed frame, the band the sensor sees.
     """
@@ -118,7 +143,7 @@ class TumFolder(ClosingSource):
         *,
         pose_source: str | None = None,
         intrinsics: tuple[float, float, float, float] = TUM_INTRINSICS,
-        depth_scale: float = TUM_DEPTH_SCALE,
+        depth_scale: float | None = None,
         level: LevelMode = "auto",
         floor_z: float | None = None,
     ) -> None:
@@ -131,7 +156,11 @@ class TumFolder(ClosingSource):
         self.path = Path(path)
         self.entries = read_depth_list(self.path / "depth.txt")
         self._intrinsics = intrinsics
-        self._scale = depth_scale
+        self.warnings: list[str] = []
+        if depth_scale is None:
+            depth_scale, note = folder_depth_scale(self.path / "depth.txt", self.entries[0][1])
+            self.warnings += [note] if note else []
+        self.depth_scale = depth_scale
         default = self.path / "groundtruth.txt"
         self.pose_spec: PoseSourceSpec = parse_pose_source(pose_source or f"tum:{default}")
         if self.pose_spec.kind not in ("tum", "none"):
@@ -144,7 +173,6 @@ class TumFolder(ClosingSource):
         self.sensor_topic = "depth.txt"
         self.sensor_type = SENSOR_TYPE
         self.base_frame = OPTICAL_FRAME
-        self.warnings: list[str] = []
         self._track: PoseTrack | None = None
         if self.pose_spec.path is not None:
             self._track = load_tum(self.pose_spec.path, child=OPTICAL_FRAME)
@@ -166,7 +194,7 @@ class TumFolder(ClosingSource):
         return None if self._track is None else self._track.stamps
 
     def _points(self, index: int, rows: slice = slice(None)) -> np.ndarray:
-        depth = read_depth_png(self.entries[index][1], self._scale)
+        depth = read_depth_png(self.entries[index][1], self.depth_scale)
         if depth.shape != self.size:
             raise PlayerError(
                 f"{self.entries[index][1]} is {depth.shape[1]}x{depth.shape[0]}, the first "

@@ -124,3 +124,19 @@ def test_the_level_and_floor_of_the_kitchen_are_found() -> None:
     )  # fmt: skip
     assert len(seen) > 1000, "the floor lies at z = 0 once levelled"
     assert np.isfinite(seen).all()
+
+
+def test_the_kitchen_folder_with_default_flags_says_what_to_give(tmp_path) -> None:
+    """Its depth.txt says millimetres, which is taken; the camera's intrinsics nothing says, and
+    with TUM's the detector sees no line: the run says so in one line, naming the flags."""
+    folder, _ = recording("redkitchen")
+    out = tmp_path / "map.json"
+    done = run_wallmap("up", str(folder), "--fast", "--exit-when-done", "--json-out", str(out),
+                       "--connect", f"tcp/127.0.0.1:{free_port()}", timeout=240)  # fmt: skip
+    reply = json.loads(out.read_text())
+    assert reply["config"]["player"]["source"].get("depth_scale") is None  # the folder's own
+    assert reply["observations"] == 0
+    said = [line for line in done.stderr.splitlines() if "no line was seen" in line]
+    assert len(said) == 1, done.stderr
+    assert "--intrinsics" in said[0]
+    assert "--depth-scale" in said[0]
