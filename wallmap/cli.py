@@ -178,6 +178,11 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
     if args.format == "ros1" and args.out.suffix != ".bag":
         msg = f"a ROS 1 bag's name ends in .bag (the player reads it by its suffix): {args.out}"
         raise ValueError(msg)
+    if args.format != "ros1" and args.out.suffix:
+        folder = args.out.with_suffix("")
+        inside = f"{folder.name}.{'mcap' if args.format == 'ros2-mcap' else 'db3'}"
+        msg = f"a ROS 2 bag is a folder: name it without a suffix ({folder} holds {inside})"
+        raise ValueError(msg)
     faults = PoseFaults(
         latency=args.pose_latency,
         heading_sd_deg=args.pose_noise,

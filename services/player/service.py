@@ -324,6 +324,11 @@ def run(
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
     with open_source(recording, player.source) as bag:
+        if player.start > bag.duration:
+            raise PlayerError(
+                f"--start {player.start:g} s is past the end of {recording}, "
+                f"{bag.duration:.1f} s long"
+            )
         for warning in bag.warnings:
             log.warning("%s", warning)
         log.info(

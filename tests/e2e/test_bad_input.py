@@ -114,6 +114,7 @@ SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
         (["player", "x.bag", "--start", "-1"], ["--start", ">= 0"]),
         (["odometry", "--initial-pose", "1,nan,0"], ["--initial-pose", "finite"]),
         (["scene", "/tmp/wallmap-scene-without-suffix"], ["ends in .bag"]),
+        (["scene", "/tmp/x.mcap", "--format", "ros2-mcap"], ["ROS 2 bag is a folder", "/tmp/x "]),
         (["query", "--connect", "garbage"], ["invalid --connect 'garbage'", "<protocol>"]),
         (["router", "--listen", "tcp:7447"], ["invalid --listen 'tcp:7447'"]),
         (["up", "x.bag", "--connect", "garbage"], ["invalid --connect 'garbage'"]),
@@ -130,6 +131,10 @@ SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
         (["up", "x.bag", "--picture", "map.bmp"], ["--picture", ".png or .svg, not .bmp"]),
         (["up", "x.bag", "--set", "up.picture=map.jpg"], ["up: picture must be .png or .svg"]),
         (["up", "/nonexistent.bag"], ["/nonexistent.bag does not exist"]),
+        (
+            ["player", SAMPLE, "--start", "1000", "--connect", "tcp/127.0.0.1:1"],
+            ["--start 1000 s is past the end", "48.8 s long"],
+        ),
         # checked before the services start, not after the recording has played
         (["up", SAMPLE, "--truth", "/nonexistent.json"], ["cannot read the ground truth"]),
         (["up", SAMPLE, "--json-out", "/nonexistent/map.json"], ["/nonexistent is not a folder"]),
