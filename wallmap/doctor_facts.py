@@ -278,5 +278,8 @@ class Report:
 
     @property
     def exit_status(self) -> int:
-        """1 when the player cannot read the bag at all, else 0 (even if it has no sensor)."""
-        return 0 if self.readable else 1
+        """1 when the player would refuse the run, else 0 (even if the bag has no sensor).
+
+        It refuses a bag it cannot read at all, and a ``--pose-source`` the bag cannot give.
+        """
+        return 0 if self.readable and self.verdict.status != "refused" else 1

@@ -404,11 +404,12 @@ def _up(path: str, *options: str) -> str:
 
 
 def _verdict(
-    report: Report, requested: str | None, *, several: bool
+    report: Report, requested: str | None, *, several: bool, asked: str | None = None
 ) -> tuple[Verdict, PoseFacts | None]:
     """Conclude: which command maps this bag (and with which pose source), or why none does.
 
     ``several``: the player refused to choose among several usable sensor topics.
+    ``asked``: the ``--pose-source`` given, judged as the player would take it.
     """
     sensor = report.sensor
     assert sensor is not None  # set for every readable bag
@@ -423,6 +424,8 @@ def _verdict(
         poses = [p.source for p in report.poses if p.available]
         also = f"; it holds poses only ({', '.join(poses)})" if poses else ""
         return Verdict("no-sensor", f"cannot be played: no usable sensor topic{also}"), None
+    if asked is not None:
+        return _asked_verdict(report, asked, topic_option)
     accepted = [p for p in report.poses if p.player == "ok" and p.frames_with_pose]
     odometry = _up(report.path, *topic_option, "--odometry")
     if not accepted or not sensor.frames:
@@ -446,18 +449,51 @@ def _verdict(
     return Verdict("partial-poses", text, command), best
 
 
+def _asked_verdict(
+    report: Report, asked: str, topic_option: tuple[str, ...]
+) -> tuple[Verdict, PoseFacts | None]:
+    """The verdict with the ``--pose-source`` given: the player's answer for it, no other."""
+    try:
+        spec = parse_pose_source(asked)
+    except PlayerError as err:
+        return Verdict("refused", f"cannot be played: {err}"), None
+    command = _up(report.path, *topic_option, "--pose-source", shlex.quote(asked))
+    if spec.kind == "none":
+        text = f"ready, the poses sent by another program (the mapper waits for them): `{command}`"
+        return Verdict("ready", text, command), None
+    named = [p for p in report.poses if p.source == str(spec)]
+    if spec.kind in ("odom", "pose") and spec.topic is None:  # the one topic of that kind
+        named = [p for p in report.poses if p.source.startswith(f"{spec.kind}:") and p.available]
+        named = named if len(named) == 1 else []
+    pose = named[0] if named else None
+    with_it = f"cannot be played with --pose-source {asked}"
+    if pose is None or not pose.available:
+        held = ", ".join(p.source for p in report.poses if p.available) or "none"
+        return Verdict("refused", f"{with_it}: the bag has no such poses (it has: {held})"), None
+    if pose.player != "ok" or not pose.frames_with_pose or report.sensor is None:
+        return Verdict("refused", f"{with_it}: {pose.player or 'no frame gets a pose'}"), None
+    share = pose.frames_with_pose / max(report.sensor.frames, 1)
+    if share >= READY_SHARE:
+        return Verdict("ready", f"ready: `{command}`", command), pose
+    text = f"partly posed: {share:.0%} of frames get a pose from {pose.source} (`{command}`)"
+    return Verdict("partial-poses", text, command), pose
+
+
 def _refuse(report: Report, reason: str) -> Report:
     report.readable = False
     report.verdict = Verdict("refused", f"cannot be played: {reason}")
     return report
 
 
-def inspect_bag(path: Path, sensor_topic: str | None = None) -> Report:
+def inspect_bag(
+    path: Path, sensor_topic: str | None = None, pose_source: str | None = None
+) -> Report:
     """Inspect a bag as the player would open it, and say what it would use.
 
     Args:
         path: ROS 1 .bag file, ROS 2 bag folder, or ROS 2 .mcap file.
         sensor_topic: The ``--sensor-topic`` the player would be given, if any.
+        pose_source: The ``--pose-source`` it would be given, if any: the verdict is for it.
 
     Returns:
         The report; ``readable`` is False (and the verdict gives the player's reason) when the
@@ -470,12 +506,14 @@ def inspect_bag(path: Path, sensor_topic: str | None = None) -> Report:
     file = file_facts(path)
     try:
         with BagFile(path) as bag:
-            return _inspect(Report(path=str(path), file=file), bag, sensor_topic)
+            return _inspect(Report(path=str(path), file=file), bag, sensor_topic, pose_source)
     except PlayerError as err:  # the player's reason: a file it cannot read, a damaged chunk
         return _refuse(Report(path=str(path), file=file), str(err))
 
 
-def _inspect(report: Report, bag: BagFile, requested: str | None) -> Report:
+def _inspect(
+    report: Report, bag: BagFile, requested: str | None, asked: str | None = None
+) -> Report:
     """Read the bag's contents once, make the player's choices and report them.
 
     Raises:
@@ -492,7 +530,7 @@ def _inspect(report: Report, bag: BagFile, requested: str | None) -> Report:
     if isinstance(sensor, SensorChoice):
         _judge_poses(report, bag, contents, sensor)
     several = isinstance(sensor, SensorRefusal) and bool(sensor.candidates)
-    report.verdict, chosen = _verdict(report, requested, several=several)
+    report.verdict, chosen = _verdict(report, requested, several=several, asked=asked)
     # What the player would warn about when run as recommended (with no poses: as `none`).
     report.warnings = chosen.warnings if chosen is not None else player_warnings
     report.placement = chosen.placement if chosen is not None else None

@@ -486,3 +486,23 @@ def test_json_and_text_say_the_same(tmp_path: Path) -> None:
     assert facts["sensor"]["frames"] == 50
     assert facts["t0"] == pytest.approx(T0)
     assert Report.__dataclass_fields__.keys() <= facts.keys()
+
+
+def test_the_pose_source_given_is_the_one_judged(tmp_path: Path) -> None:
+    """`wallmap doctor BAG --pose-source SPEC`: the verdict is the player's for SPEC."""
+    info = write_scene_bag(tmp_path / "scene.bag", seed=11, n_frames=30, fmt="ros1",
+                           sensor="depth16")  # fmt: skip
+    path = str(info.path)
+    verdicts = {}
+    for spec in ("pose:/nonexistent", "bogus", "none", "odom", "pose:/amcl_pose"):
+        report = inspect_bag(info.path, pose_source=spec)
+        verdicts[spec] = (report.exit_status, report.verdict.status, report.verdict.text)
+    assert verdicts["pose:/nonexistent"][:2] == (1, "refused")
+    assert "the bag has no such poses (it has: tf:map>base_link" in verdicts["pose:/nonexistent"][2]
+    assert verdicts["bogus"][:2] == (1, "refused")
+    assert "invalid pose source 'bogus'" in verdicts["bogus"][2]
+    assert verdicts["none"][:2] == (0, "ready")
+    assert f"`wallmap up {path} --fast --pose-source none`" in verdicts["none"][2]
+    assert verdicts["odom"] == (0, "ready", f"ready: `wallmap up {path} --fast --pose-source odom`")
+    assert verdicts["pose:/amcl_pose"][:2] == (0, "ready")
+    assert inspect_bag(info.path).verdict.text == f"ready: `wallmap up {path} --fast`"
