@@ -31,7 +31,7 @@ from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_histor
 from wallmap.common.messages import Frame, pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
 from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
@@ -323,6 +323,7 @@ def run(
     keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)
     run_id = uuid.uuid4().hex[:12]
+    make_config(settings)  # a bad endpoint or Zenoh file is said before the bag is read
     with open_source(recording, player.source) as bag:
         if player.start > bag.duration:
             raise PlayerError(

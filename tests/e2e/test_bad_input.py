@@ -132,6 +132,10 @@ SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
         (["up", "x.bag", "--set", "up.picture=map.jpg"], ["up: picture must be .png or .svg"]),
         (["up", "/nonexistent.bag"], ["/nonexistent.bag does not exist"]),
         (
+            ["player", SAMPLE, "--zenoh-config", "/nonexistent.json5"],
+            ["zenoh config /nonexistent.json5 does not exist"],
+        ),
+        (
             ["player", SAMPLE, "--start", "1000", "--connect", "tcp/127.0.0.1:1"],
             ["--start 1000 s is past the end", "48.8 s long"],
         ),
