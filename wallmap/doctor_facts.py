@@ -18,7 +18,7 @@ JUMP_LIMIT = 1.0
 LISTED = 10
 
 VerdictStatus = Literal[
-    "ready", "partial-poses", "no-poses", "choose-sensor", "no-sensor", "refused"
+    "ready", "partial-poses", "no-poses", "choose-sensor", "no-sensor", "check-camera", "refused"
 ]
 
 

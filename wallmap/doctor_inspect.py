@@ -63,7 +63,12 @@ from wallmap.services.player.pose_sources import (
     parse_pose_source,
 )
 from wallmap.services.player.sources import SourceOptions
-from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
+from wallmap.services.player.tum_folder import (
+    OPTICAL_FRAME,
+    SENSOR_TYPE,
+    TUM_INTRINSICS,
+    TumFolder,
+)
 
 # Clouds and images are big: their share of invalid points is measured on the first few.
 INVALID_SAMPLE = 5
@@ -649,8 +654,16 @@ def inspect_tum(path: Path, source: SourceOptions) -> Report:
     camera = ["--intrinsics", ",".join(f"{v:g}" for v in source.intrinsics)]
     camera += ["--depth-scale", f"{folder.depth_scale:g}"]
     command = _up(str(path), *camera, *(() if pose.default else ("--pose-source", spec)))
+    level = folder.placement.level
     if not pose.available or not pose.frames_with_pose:
         report.verdict = Verdict("no-poses", f"no poses: give --pose-source tum:FILE (`{command}`)")
+    elif source.intrinsics == TUM_INTRINSICS and level and level.frames and level.floor is None:
+        # A carried camera sees the floor: with none in any frame, the guessed camera is wrong.
+        text = (
+            f"check the camera: no floor seen in {level.frames} frames with TUM's intrinsics; "
+            f"give the recording's own (`{_up(str(path), '--intrinsics', 'FX,FY,CX,CY')}`)"
+        )
+        report.verdict = Verdict("check-camera", text)
     elif pose.frames_with_pose >= READY_SHARE * len(stamps):
         report.verdict = Verdict("ready", f"ready: `{command}`", command)
     else:

@@ -17,6 +17,7 @@ import pytest
 from conftest import free_port, run_wallmap
 
 from wallmap.common.map_consistency import MappedWall, distance_to_walls, duplicates, fans
+from wallmap.doctor_inspect import inspect_tum
 from wallmap.offline import points_at_heights
 from wallmap.recordings import RGBD, DepthCamera, tum_as_bag
 from wallmap.services.player.sources import SourceOptions
@@ -140,3 +141,15 @@ def test_the_kitchen_folder_with_default_flags_says_what_to_give(tmp_path) -> No
     assert len(said) == 1, done.stderr
     assert "--intrinsics" in said[0]
     assert "--depth-scale" in said[0]
+
+
+def test_the_doctor_asks_for_the_kitchen_folder_s_camera() -> None:
+    """With TUM's intrinsics no frame of the kitchen sees its floor: the doctor asks for the
+    camera instead of saying ready; with the recording's own it is ready."""
+    folder, camera = recording("redkitchen")
+    guessed = inspect_tum(folder, SourceOptions())
+    assert guessed.verdict.status == "check-camera"
+    assert "--intrinsics FX,FY,CX,CY" in guessed.verdict.text
+    given = inspect_tum(folder, SourceOptions(intrinsics=camera.intrinsics))
+    assert given.verdict.status == "ready"
+    assert "--depth-scale 1000" in given.verdict.text  # what its depth.txt says
