@@ -12,6 +12,7 @@ out to nobody.
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 import threading
@@ -307,6 +308,24 @@ def _play(
             return
 
 
+def _check_and_describe(
+    bag: FrameSource, recording: Path, player: PlayerSettings, log: logging.Logger
+) -> None:
+    """Refuse a start past the recording's end; log what will be played, and how."""
+    if player.start > bag.duration:
+        raise PlayerError(
+            f"--start {player.start:g} s is past the end of {recording}, {bag.duration:.1f} s long"
+        )
+    for warning in bag.warnings:
+        log.warning("%s", warning)
+    log.info(
+        "%s: %d frames on %s (%s), poses from %s",
+        recording, bag.frame_count, bag.sensor_topic, bag.sensor_type, bag.pose_spec,
+    )  # fmt: skip
+    if placed := bag.placement.describe():
+        log.info("%s", placed)
+
+
 def run(
     settings: ZenohSettings,
     recording: Path,
@@ -325,23 +344,7 @@ def run(
     run_id = uuid.uuid4().hex[:12]
     make_config(settings)  # a bad endpoint or Zenoh file is said before the bag is read
     with open_source(recording, player.source) as bag:
-        if player.start > bag.duration:
-            raise PlayerError(
-                f"--start {player.start:g} s is past the end of {recording}, "
-                f"{bag.duration:.1f} s long"
-            )
-        for warning in bag.warnings:
-            log.warning("%s", warning)
-        log.info(
-            "%s: %d frames on %s (%s), poses from %s",
-            recording,
-            bag.frame_count,
-            bag.sensor_topic,
-            bag.sensor_type,
-            bag.pose_spec,
-        )
-        if placed := bag.placement.describe():
-            log.info("%s", placed)
+        _check_and_describe(bag, recording, player, log)
         with open_session(settings, stop=stop) as session:
             acks = AckWindow(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
