@@ -1,6 +1,5 @@
 import json
 import math
-import time
 from collections import Counter, defaultdict
 
 import numpy as np
@@ -449,18 +448,6 @@ def test_walls_seen_needs_the_height_band():
     assert walls_seen(low_hit, low, CAMERA) == set()
     glass, glass_hit = render_depth(wall_ahead(3.0, glass=True), 0.0, 0.0, 0.0, CAMERA, None)
     assert walls_seen(glass_hit, glass, CAMERA) == set()
-
-
-def test_render_is_fast():
-    plan = generate_floorplan(0)
-    traj = generate_trajectory(plan, 0)
-    rng = np.random.default_rng(0)
-    times = []
-    for i in range(0, len(traj), len(traj) // 15):
-        start = time.perf_counter()
-        render_depth(plan, *traj.pose_at(i), CAMERA, rng)
-        times.append(time.perf_counter() - start)
-    assert np.median(times) < 0.05
 
 
 # --- laser scans ---------------------------------------------------------------------------
