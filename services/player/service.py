@@ -41,6 +41,7 @@ from wallmap.services.player.pose_stream import POSE_PERIOD, stream_of
 from wallmap.services.player.sources import FrameSource, SourceOptions, open_source
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
+JOIN_TIMEOUT = 2.0  # s the control thread gets to see its queryable undeclared
 PROGRESS_PERIOD = 0.2  # s between progress messages
 
 
@@ -357,9 +358,10 @@ def run(
             playback = Playback(player.rate, fast=player.fast, paused=player.paused)
             outlet = _Outlet(session, keys, run_id, sensor, playback, bag, history, player.rate)
             control = session.declare_queryable(keys.player_control, zenoh.handlers.FifoChannel(16))
-            threading.Thread(
+            answering = threading.Thread(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
-            ).start()
+            )
+            answering.start()
             start_wall = time.monotonic()
             with terminal_keys(playback, stop) as interactive:
                 if interactive:
@@ -371,6 +373,9 @@ def run(
             seconds = time.monotonic() - start_wall
             outlet.finish()
             control.undeclare()
+            # Out of Zenoh's recv before the interpreter ends: a thread woken inside it then
+            # is unwound through Zenoh's frames and aborts the process.
+            answering.join(timeout=JOIN_TIMEOUT)
             progress_sub.undeclare()
     waited = player.fast or "mapper" in player.services
     return PlayResult(outlet.published, outlet.poses, seconds, acks.integrated if waited else None)
