@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from wallmap.arg_types import PICTURE_SUFFIXES
+from wallmap.arg_types import picture_problem
 from wallmap.common import config_file
 from wallmap.common.config_file import Tree, require
 from wallmap.common.delivery import History
@@ -66,8 +66,8 @@ class UpSettings:
     def __post_init__(self) -> None:
         require(self.min_obs >= 1, "min_obs", ">= 1", self.min_obs)
         if self.picture is not None:
-            suffix = Path(self.picture).suffix.lower()
-            require(suffix in PICTURE_SUFFIXES, "picture", ".png or .svg", str(self.picture))
+            ok = picture_problem(Path(self.picture)) is None
+            require(ok, "picture", ".png or .svg", str(self.picture))
 
 
 @dataclass(frozen=True)

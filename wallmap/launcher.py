@@ -248,10 +248,10 @@ def _report(config: Config, bag: Path, truth: Truth | None, *, partial: bool = F
               "frames")  # fmt: skip
     print(format_table(reply))
     if reply.frames and not reply.observations:
-        seen = f"no line was seen in any of the {reply.frames} frames"
+        nothing = f"no line was seen in any of the {reply.frames} frames"
         why = "nothing in the band the detector reads, or the camera is read wrong"
         ask = f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
-        print(f"wallmap up: {seen}: {why} {ask}", file=sys.stderr)
+        print(f"wallmap up: {nothing}: {why} {ask}", file=sys.stderr)
     if truth is not None:
         plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
