@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import collections
 import math
+import statistics
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,7 +59,7 @@ def line_turn(before: Array, after: Array) -> float | None:
     close = (np.abs(turn) <= MATCH_ANGLE) & (np.abs(d1[:, None] - d0[None, :]) <= MATCH_OFFSET)
     nearest = np.argmin(np.where(close, np.abs(turn), np.inf), axis=1)
     turns = turn[np.arange(len(after)), nearest][close.any(axis=1)]
-    return -float(np.median(turns)) if len(turns) else None
+    return -statistics.median(turns.tolist()) if len(turns) else None
 
 
 def _chained(turns: Array) -> tuple[Array, Array, Array]:

@@ -117,11 +117,9 @@ def _linearized(
 ) -> tuple[Array, Array, Array, Array]:
     """At ``xi``: the pose, the residuals, their Jacobians over the active states and S^-1."""
     x, jx = frame_pose(xi, source)
-    hw = wall_model.jacobian_state_many(pairs.s, pairs.anchor, x)
+    predicted, hw, hp = wall_model.linearized_many(pairs.s, pairs.anchor, x)
     s_inv = _inverse_2x2(pairs.r + hw @ pairs.p @ hw.transpose(0, 2, 1))
-    h = wall_model.jacobian_pose_many(pairs.s, pairs.anchor, x) @ jx[:, active]
-    residual = pairs.z - wall_model.predict_many(pairs.s, pairs.anchor, x)
-    return x, residual, h, s_inv
+    return x, pairs.z - predicted, hp @ jx[:, active], s_inv
 
 
 def fit(

@@ -12,13 +12,14 @@ caught does not teach the source is worse than it is.
 
 from __future__ import annotations
 
-import collections
 import math
+import statistics
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from wallmap.common.rolling_median import RollingMedian
 from wallmap.common.se2 import Array
 
 OUTLIER = 9.0  # a correction's squared ratio to its predicted variance counts at most this
@@ -150,7 +151,7 @@ class NoiseScale:
     def __init__(self, window: int = 200, limits: tuple[float, float] = (1.0, 100.0)) -> None:
         self.limits = limits
         self.scale = 1.0
-        self._targets: collections.deque[float] = collections.deque(maxlen=window)
+        self._targets = RollingMedian(window)
 
     def to_json(self) -> dict[str, Any]:
         """The factor and the frames it comes from (a state file's)."""
@@ -167,10 +168,10 @@ class NoiseScale:
         """A frame's distances, computed with the covariances scaled by ``scale``."""
         if len(m2) < 2:
             return
-        self._targets.append(self.scale * float(np.median(m2)) / self.MEDIAN_2DOF)
+        self._targets.add(self.scale * statistics.median(m2.tolist()) / self.MEDIAN_2DOF)
         if len(self._targets) >= 5:
             low, high = self.limits
-            self.scale = float(np.clip(np.median(self._targets), low, high))
+            self.scale = min(max(self._targets.median(), low), high)
 
 
 class JumpDetector:
@@ -196,20 +197,23 @@ class JumpDetector:
     ) -> None:
         self.factor, self.least = factor, least
         self._last: list[tuple[float, Array]] = []  # the two frames before, oldest first
-        self._deviations: collections.deque[tuple[float, float]] = collections.deque(maxlen=window)
+        self._xy, self._yaw = RollingMedian(window), RollingMedian(window)
 
     def to_json(self) -> dict[str, Any]:
         """The frames before and the deviations seen lately (a state file's)."""
         return {
             "last": [[t, p.tolist()] for t, p in self._last],
-            "deviations": [list(d) for d in self._deviations],
+            "deviations": [list(d) for d in zip(self._xy, self._yaw, strict=True)],
         }
 
     def restore(self, data: dict[str, Any]) -> None:
         """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
         self._last = [(float(t), _finite(p, 3)) for t, p in data["last"]]
-        self._deviations.clear()
-        self._deviations.extend(_finite_pair(d) for d in data["deviations"])
+        deviations = [_finite_pair(d) for d in data["deviations"]]
+        self._xy.clear()
+        self._yaw.clear()
+        self._xy.extend(xy for xy, _ in deviations)
+        self._yaw.extend(yaw for _, yaw in deviations)
 
     def add(self, stamp: float, pose: Array) -> bool:
         """The source's pose (x, y, yaw) at a frame; whether it jumped there."""
@@ -226,12 +230,13 @@ class JumpDetector:
         xy = math.hypot(pose[0] - predicted[0], pose[1] - predicted[1])
         yaw = abs(math.remainder(pose[2] - predicted[2], 2 * math.pi))
         jumped = False
-        if len(self._deviations) >= 10:
-            scale = 1.4826 * np.median(np.array(self._deviations), axis=0)
-            jumped = (xy > max(self.factor * scale[0], self.least[0])
-                      or yaw > max(self.factor * scale[1], self.least[1]))  # fmt: skip
+        if len(self._xy) >= 10:
+            scale_xy, scale_yaw = 1.4826 * self._xy.median(), 1.4826 * self._yaw.median()
+            jumped = (xy > max(self.factor * scale_xy, self.least[0])
+                      or yaw > max(self.factor * scale_yaw, self.least[1]))  # fmt: skip
         if not jumped:
-            self._deviations.append((xy, yaw))
+            self._xy.add(xy)
+            self._yaw.add(yaw)
         return jumped
 
 

@@ -165,11 +165,7 @@ class PoseJudge:
 
     def prepare(self, frame: Observations, source: SourcePose) -> Observations:
         """The frame's observations with the noise learnt: widened over a sweep, then scaled."""
-        frame = sweep_widened(frame, source)
-        k = self.noise.scale
-        if k == 1.0 or not frame.walls:
-            return frame
-        return replace(frame, walls=[replace(w, cov=w.cov * k) for w in frame.walls])
+        return sweep_widened(frame, source, self.noise.scale)
 
     def judge(
         self, frame: Observations, source: SourcePose, wall_map: WallMap, poses: PoseBuffer
@@ -453,20 +449,27 @@ def _as_pose(given: Pose, stamp: float, x: Array, cov: Array) -> Pose:
     return replace(given, stamp=stamp, x=float(x[0]), y=float(x[1]), yaw=float(x[2]), cov=cov)
 
 
-def sweep_widened(frame: Observations, source: SourcePose) -> Observations:
-    """A frame captured over a sweep (``frame.sweep`` s) and not deskewed, its lines widened.
+def sweep_widened(frame: Observations, source: SourcePose, scale: float = 1.0) -> Observations:
+    """A frame captured over a sweep and not deskewed, its lines widened; then scaled.
+
+    ``scale``: the judge's ``NoiseScale``, by which every covariance is multiplied.
 
     A spinning scanner sees each wall at another instant of its sweep; while the robot turns,
     its lines are turned and moved by up to the motion of the sweep. Without the beams' times
     that motion is unknown, so it is noise: uniform over the sweep, the robot-frame motion
     ``v T`` has variance ``(v T)^2 / 12``, which enters each line as pose noise does.
     """
-    if frame.sweep <= 0 or not frame.walls:
+    swept = frame.sweep > 0
+    if not frame.walls or (not swept and scale == 1.0):
         return frame
-    body = np.array([*se2.unrotate(source.velocity[:2], source.pose.yaw), source.velocity[2]])
-    spread = np.diag(np.square(body * frame.sweep)) / 12.0
-    z = np.array([w.closest for w in frame.walls])
-    jac = wall_model.jacobian_pose_many(z, np.zeros_like(z), np.zeros(3))
-    extra = jac @ spread @ jac.transpose(0, 2, 1)
-    walls = [replace(w, cov=w.cov + e) for w, e in zip(frame.walls, extra, strict=True)]
+    cov = np.array([w.cov for w in frame.walls])
+    if swept:
+        body = np.array([*se2.unrotate(source.velocity[:2], source.pose.yaw), source.velocity[2]])
+        spread = np.diag(np.square(body * frame.sweep)) / 12.0
+        z = np.array([w.closest for w in frame.walls])
+        jac = wall_model.jacobian_pose_many(z, np.zeros_like(z), np.zeros(3))
+        cov = cov + jac @ spread @ jac.transpose(0, 2, 1)
+    if scale != 1.0:
+        cov = cov * scale
+    walls = [replace(w, cov=c) for w, c in zip(frame.walls, cov, strict=True)]
     return replace(frame, walls=walls)

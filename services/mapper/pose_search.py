@@ -105,17 +105,8 @@ def associate(
     """
     if not len(found.obs):
         return _no_pairs(), []
-    h = wall_model.jacobian_state_many(found.s, found.anchor, pose)
-    jp = wall_model.jacobian_pose_many(found.s, found.anchor, pose)
-    cov = found.r + h @ found.p @ h.transpose(0, 2, 1) + jp @ pose_cov @ jp.transpose(0, 2, 1)
-    residual = found.z - wall_model.predict_many(found.s, found.anchor, pose)
-    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] * cov[:, 1, 0]
-    m2 = (
-        cov[:, 1, 1] * residual[:, 0] ** 2
-        - 2.0 * cov[:, 0, 1] * residual[:, 0] * residual[:, 1]
-        + cov[:, 0, 0] * residual[:, 1] ** 2
-    ) / det
-    score = np.where(m2 <= CHI2_2DOF_999, -0.5 * (m2 + np.log(det)), -np.inf)
+    innov = ekf.innovations(found.s, found.p, found.anchor, found.z, found.r, pose, pose_cov)
+    score = np.where(innov.mahalanobis2 <= CHI2_2DOF_999, innov.log_likelihood, -np.inf)
     best: dict[int, int] = {}
     for k in np.flatnonzero(np.isfinite(score)):
         i = int(found.obs[k])

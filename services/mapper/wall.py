@@ -58,9 +58,9 @@ class Wall:
         self.direction = np.array([-ny, nx])  # wall_model.direction, in floats
         # The same as plain floats, and the extent's span along the line, for _near's hot loop.
         self.frame = (fx, fy, -ny, nx, nx, ny)
-        self.span = self._span(self.ends.tolist())
+        self.span = self.span_of(self.ends.tolist())
 
-    def _span(self, points: list[list[float]]) -> tuple[float, float]:
+    def span_of(self, points: list[list[float]]) -> tuple[float, float]:
         """Lowest and highest position of map points along the wall (plain floats)."""
         fx, fy, dx, dy, _, _ = self.frame
         t = [(x - fx) * dx + (y - fy) * dy for x, y in points]
@@ -76,7 +76,7 @@ class Wall:
 
     def extend(self, points: Array) -> None:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
-        self.span = self._span(self.ends.tolist() + points.tolist())
+        self.span = self.span_of(self.ends.tolist() + points.tolist())
         self.ends = self.on_line(np.array(self.span))
 
     def segments(self) -> Array:

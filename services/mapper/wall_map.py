@@ -36,9 +36,12 @@ KEYFRAME_GAP = 100  # frames without a keyframe at most (a robot standing still)
 
 
 def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
-    """The observed segment's two ends in the map frame."""
-    rot = se2.rotation(pose[2])
-    return np.array([pose[:2] + rot @ obs.p0, pose[:2] + rot @ obs.p1])
+    """The observed segment's two ends in the map frame (in floats: three per observation)."""
+    x, y, yaw = pose.tolist()
+    c, s = math.cos(yaw), math.sin(yaw)
+    (ax, ay), (bx, by) = obs.p0.tolist(), obs.p1.tolist()
+    return np.array([[x + c * ax - s * ay, y + s * ax + c * ay],
+                     [x + c * bx - s * by, y + s * bx + c * by]])  # fmt: skip
 
 
 def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
@@ -210,18 +213,15 @@ class WallMap:
         Maximum likelihood over the walls near the observed segment, on the innovation
         covariance (wall, observation and pose). ``min_obs``: only walls seen that often.
         """
-        best: tuple[float, Wall, ekf.Innovation] | None = None
-        for wall in self.near_observation(obs, pose):
-            if wall.n_obs < min_obs:
-                continue
-            innov = ekf.innovation(
-                wall.s, wall.p, wall.anchor, obs.closest, obs.cov, pose, pose_cov
-            )
-            if innov.mahalanobis2 <= self.config.gate and (
-                best is None or innov.log_likelihood > best[0]
-            ):
-                best = (innov.log_likelihood, wall, innov)
-        return None if best is None else best[1:]
+        walls = [w for w in self.near_observation(obs, pose) if w.n_obs >= min_obs]
+        if not walls:
+            return None
+        s, p, anchor = (np.array([w.s for w in walls]), np.array([w.p for w in walls]),
+                        np.array([w.anchor for w in walls]))  # fmt: skip
+        innov = ekf.innovations(s, p, anchor, obs.closest, obs.cov, pose, pose_cov)
+        score = np.where(innov.mahalanobis2 <= self.config.gate, innov.log_likelihood, -np.inf)
+        best = int(np.argmax(score))  # the first of equals, as the walls are listed
+        return None if score[best] == -np.inf else (walls[best], innov.at(best))
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""
@@ -230,8 +230,8 @@ class WallMap:
         for other in self._near(reach, max_gap=0.0):
             if other.id not in self.walls or other is wall or wall.id not in self.walls:
                 continue
-            ta, tb = wall.along(wall.ends), wall.along(other.ends)
-            overlap = min(ta.max(), tb.max()) >= max(ta.min(), tb.min())
+            (low, high), (other_low, other_high) = wall.span, wall.span_of(other.ends.tolist())
+            overlap = min(high, other_high) >= max(low, other_low)
             if self._same_wall(wall, other) if overlap else self._continues(wall, other):
                 wall = self._absorb(wall, other, stamp)
         return wall
