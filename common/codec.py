@@ -30,7 +30,11 @@ class MessageError(ValueError):
 
 def check_coordinates(values: Any, what: str) -> None:
     """MessageError if any of ``values`` (finite numbers, any shape) is beyond MAX_COORDINATE."""
-    if float(np.max(np.abs(values), initial=0.0)) > MAX_COORDINATE:
+    if isinstance(values, tuple):  # plain floats: a wall's (u, v), thousands a second
+        beyond = any(abs(value) > MAX_COORDINATE for value in values)
+    else:
+        beyond = float(np.max(np.abs(values), initial=0.0)) > MAX_COORDINATE
+    if beyond:
         msg = f"{what} lies beyond {MAX_COORDINATE:.0e} m of the origin"
         raise MessageError(msg)
 

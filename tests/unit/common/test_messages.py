@@ -99,6 +99,26 @@ def test_bad_poses_are_refused_with_their_reason(payload, reason):
         unpack_pose(payload)
 
 
+@pytest.mark.parametrize(
+    ("cov", "reason"),
+    [
+        ([[1e-4, 2e-6], [1e-6, 1e-4]], "not symmetric"),
+        ([[1e-4, 2e-4], [2e-4, 1e-4]], "positive semi-definite"),
+        ([[1e-4, 1e-4], [1e-4, 1e-4]], "singular"),
+        ([[0.0, 0.0], [0.0, 0.0]], "singular"),
+        ([[1e-4, 1e-6], [1e-6 * (1 + 1e-7), 2e-4]], None),  # symmetric to rounding
+    ],
+)
+def test_a_wall_s_covariance_is_a_covariance(cov: list[list[float]], reason: str | None) -> None:
+    m = WallObservation(np.array([1.0, 2.0]), np.eye(2), np.zeros(2), np.ones(2), 30, 0.01)
+    m = {**m.to_map(), "cov": cov}
+    if reason is None:
+        np.testing.assert_array_equal(WallObservation.from_map(m).cov, cov)
+    else:
+        with pytest.raises(MessageError, match=reason):
+            WallObservation.from_map(m)
+
+
 def test_bad_frames_are_refused_with_their_reason():
     good = make_frame().to_map()
     cases = {
