@@ -74,16 +74,6 @@ class Innovations:
     mahalanobis2: Array
     log_likelihood: Array
 
-    def at(self, k: int) -> Innovation:
-        """The ``k``-th as one :class:`Innovation`."""
-        return Innovation(
-            self.residual[k],
-            self.cov[k],
-            self.jacobian[k],
-            float(self.mahalanobis2[k]),
-            float(self.log_likelihood[k]),
-        )
-
 
 def innovations(
     s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array

@@ -213,15 +213,18 @@ class WallMap:
         Maximum likelihood over the walls near the observed segment, on the innovation
         covariance (wall, observation and pose). ``min_obs``: only walls seen that often.
         """
-        walls = [w for w in self.near_observation(obs, pose) if w.n_obs >= min_obs]
-        if not walls:
-            return None
-        s, p, anchor = (np.array([w.s for w in walls]), np.array([w.p for w in walls]),
-                        np.array([w.anchor for w in walls]))  # fmt: skip
-        innov = ekf.innovations(s, p, anchor, obs.closest, obs.cov, pose, pose_cov)
-        score = np.where(innov.mahalanobis2 <= self.config.gate, innov.log_likelihood, -np.inf)
-        best = int(np.argmax(score))  # the first of equals, as the walls are listed
-        return None if score[best] == -np.inf else (walls[best], innov.at(best))
+        best: tuple[float, Wall, ekf.Innovation] | None = None
+        for wall in self.near_observation(obs, pose):
+            if wall.n_obs < min_obs:
+                continue
+            innov = ekf.innovation(
+                wall.s, wall.p, wall.anchor, obs.closest, obs.cov, pose, pose_cov
+            )
+            if innov.mahalanobis2 <= self.config.gate and (
+                best is None or innov.log_likelihood > best[0]
+            ):
+                best = (innov.log_likelihood, wall, innov)
+        return None if best is None else best[1:]
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""

@@ -134,12 +134,11 @@ def test_the_innovations_of_many_walls_are_each_wall_s_innovation():
         for k in range(n):
             zk, rk = (z[k], r[k]) if z.ndim == 2 else (z, r)
             one = ekf.innovation(s[k], p[k], anchor[k], zk, rk, pose, pose_cov)
-            at = many.at(k)
-            np.testing.assert_allclose(at.residual, one.residual, atol=1e-12)
-            np.testing.assert_allclose(at.cov, one.cov, rtol=1e-12)
-            np.testing.assert_allclose(at.jacobian, one.jacobian, rtol=1e-12, atol=1e-15)
-            assert at.mahalanobis2 == pytest.approx(one.mahalanobis2, rel=1e-9)
-            assert at.log_likelihood == pytest.approx(one.log_likelihood, rel=1e-9, abs=1e-9)
+            np.testing.assert_allclose(many.residual[k], one.residual, atol=1e-12)
+            np.testing.assert_allclose(many.cov[k], one.cov, rtol=1e-12)
+            np.testing.assert_allclose(many.jacobian[k], one.jacobian, rtol=1e-12, atol=1e-15)
+            assert many.mahalanobis2[k] == pytest.approx(one.mahalanobis2, rel=1e-9)
+            assert many.log_likelihood[k] == pytest.approx(one.log_likelihood, rel=1e-9, abs=1e-9)
 
 
 def test_ekf_converges_and_is_consistent():
