@@ -48,6 +48,7 @@ from wallmap.options import (
     ODOMETRY,
     PLAYER,
     POSES,
+    ROS2,
     SLAM,
     SOURCE,
     SPEED,
@@ -65,6 +66,7 @@ from wallmap.services.mapper.state_file import StateError
 from wallmap.services.odometry import service as odometry_service
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.ros2_source import service as ros2_service
 from wallmap.status import fetch_status, format_status
 from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
@@ -115,6 +117,14 @@ def _cmd_mapper(_: argparse.Namespace, config: Config) -> int:
         config.history,
         to_plain(config),
     )
+    return 0
+
+
+def _cmd_ros2(_: argparse.Namespace, config: Config) -> int:
+    if config.ros2.sensor is None:
+        raise PlayerError("--sensor TOPIC:TYPE is needed: which of the robot's topics to map")
+    zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
+    ros2_service.run(zenoh_settings, config.ros2, stop_on_signals(), config.history)
     return 0
 
 
@@ -284,6 +294,9 @@ def build_parser() -> argparse.ArgumentParser:
                 STATE, MAPPER, POSES, SLAM, HISTORY, ZENOH)  # fmt: skip
     add_command(sub, "odometry", "poses from the sensor frames (scan matching)", _cmd_odometry,
                 ODOMETRY, HISTORY, ZENOH)  # fmt: skip
+
+    add_command(sub, "ros2", "a live ROS 2 robot's topics on Zenoh -> frames and poses",
+                _cmd_ros2, ROS2, HISTORY, ZENOH)  # fmt: skip
 
     p = add_command(sub, "query", "print the current wall map", _cmd_query, ZENOH)
     p.add_argument("--json", action="store_true", help="the contract's JSON instead of a table")

@@ -35,6 +35,7 @@ from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.mapper.service import MapperSettings
 from wallmap.services.odometry.tracker import OdometryConfig
 from wallmap.services.player.service import PlayerSettings
+from wallmap.services.ros2_source.settings import Ros2Settings
 
 HEADER = """\
 # wallmap configuration: `wallmap COMMAND --config FILE` reads it; `--set SECTION.KEY=VALUE` and
@@ -96,6 +97,7 @@ class Config:
         odometry: How poses are estimated from scans (``wallmap odometry``).
         up: What ``wallmap up`` runs and writes.
         view: Where ``wallmap view`` serves its page.
+        ros2: What ``wallmap ros2`` reads of a live ROS 2 robot.
     """
 
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
@@ -106,6 +108,7 @@ class Config:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     up: UpSettings = field(default_factory=UpSettings)
     view: ViewSettings = field(default_factory=ViewSettings)
+    ros2: Ros2Settings = field(default_factory=Ros2Settings)
 
 
 def with_odometry_poses(config: Config) -> Config:

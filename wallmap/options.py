@@ -173,6 +173,22 @@ SOURCE = (
            "else TUM's 5000)", positive, metavar="N"),
 )  # fmt: skip
 
+ROS2 = (
+    Option("--namespace", "ros2.namespace", "the bridge's --namespace: topic /T is the key "
+           "NAMESPACE/T", metavar="NS"),
+    Option("--sensor", "ros2.sensor", "the sensor topic and its type: sensor_msgs/msg/Image "
+           "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan",
+           metavar="TOPIC:TYPE"),
+    Option("--camera-info", "ros2.camera_info", "a depth image's CameraInfo topic (not set: "
+           "camera_info beside the image)", metavar="TOPIC"),
+    Option("--pose-source", "ros2.pose_source", "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
+           "pose[:TOPIC] | none", metavar="SPEC"),
+    Option("--tf-wait", "ros2.tf_wait", "seconds a sensor message waits for its tf, then is "
+           "dropped and counted", positive, metavar="S"),
+    Option("--whole-clouds", "ros2.whole_clouds", "send whole clouds, not only the rows the "
+           "detector asks for", const=True),
+)  # fmt: skip
+
 PLAYER = (
     Option("--wait-timeout", "player.wait_timeout", "wait for router and services (s)", positive),
     Option("--whole-clouds", "player.whole_clouds", "send whole clouds, not only the rows the "

@@ -26,13 +26,14 @@ import zenoh
 from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
-from wallmap.common.codec import MessageError, decode, encode
+from wallmap.common.codec import encode
 from wallmap.common.config_file import require
 from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_history_publisher
 from wallmap.common.messages import Frame, pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
+from wallmap.services.detector_rows import ask_rows
 from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
@@ -135,17 +136,6 @@ def _wait_for_services(
             raise PlayerError(msg)
         if missing:
             stop.wait(0.1)
-
-
-def _ask_rows(session: zenoh.Session, keys: Keys) -> RowSelection | None:
-    """The detector's row selection, or None (send whole clouds) when no detector answers."""
-    for reply in session.get(keys.detector_rows, timeout=2.0):
-        if reply.ok is not None:
-            try:
-                return RowSelection.from_map(decode(reply.ok.payload.to_bytes()))
-            except MessageError:
-                return None
-    return None
 
 
 class _ProgressLine:
@@ -351,7 +341,7 @@ def run(
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
             _wait_for_services(session, keys, player.services, player.wait_timeout, stop)
             sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
-            rows = None if player.whole_clouds or sensor == "scan" else _ask_rows(session, keys)
+            rows = None if player.whole_clouds or sensor == "scan" else ask_rows(session, keys)
             log.info(
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )

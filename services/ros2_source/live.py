@@ -1,0 +1,191 @@
+"""A live robot's messages as the player's frames and poses. Pure: no Zenoh, no clock of its own.
+
+A bag holds every transform before it is played; a live robot's arrive as they come, and a
+sensor message often comes before the tf that places it (``odom -> base_link`` at 50 Hz, the
+camera at 30 Hz, a localiser's ``map -> odom`` late by a scan). So each sensor message waits, as
+a tf2 message filter holds it, until the tree covers its stamp: its mount (base <- sensor) and,
+with a tf pose source, the robot's pose (fixed <- robot). One that waits longer than
+``tf_wait`` seconds of the robot's own time (the newest stamp seen on any topic) is dropped and
+counted, so a missing transform never stalls the source. A clock that jumps back (a new session
+of the robot, a bag played again) starts over: buffers, waiting frames, and the camera's info.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wallmap.common.messages import Pose
+from wallmap.common.ros_poses import header_stamp, pose_from_matrix, pose_from_message
+from wallmap.common.scan_row import RowSelection
+from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
+from wallmap.services.player.bag_contents import IMAGE, LASERSCAN, POINTCLOUD2
+from wallmap.services.player.depth import depth_image_to_xyz
+from wallmap.services.player.frames import SensorFrame, hand_out
+from wallmap.services.player.laserscan import laserscan_to_xyz
+from wallmap.services.player.placement import unlevelled
+from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
+from wallmap.services.player.pose_sources import PoseSourceSpec
+
+MAX_WAITING = 64  # sensor messages waiting for their tf at most; the oldest gives way
+CLOCK_JUMP = 5.0  # s back in the robot's time: a new session, not a late message
+
+
+Report = Callable[[str, str], None]  # (counter, what happened): the service counts and logs
+
+
+@dataclass
+class _Waiting:
+    stamp: float
+    frame_id: str
+    message: Any
+
+
+@dataclass
+class LiveFrames:
+    """Sensor messages, tf and poses in; frames placed as the player places them out.
+
+    Attributes:
+        sensor_type: The sensor topic's message type (one of ``LIVE_TYPES``).
+        pose_source: Where the robot's pose comes from: ``tf`` (a chain of the tree),
+            ``odom``/``pose`` (a topic, given to ``add_pose``) or ``none``.
+        base_frame: The robot frame the mount is looked up to (the pose source's child).
+        tf_wait: Seconds of the robot's time a sensor message waits for its tf.
+        rows: The rows the detector asks for (None: whole clouds).
+        report: Told of each message dropped (``no_tf``, ``no_camera_info``, ``overflow``)
+            and of each restart (``restarts``), with a line for the log.
+    """
+
+    sensor_type: str
+    pose_source: PoseSourceSpec
+    base_frame: str = "base_link"
+    tf_wait: float = 1.0
+    rows: RowSelection | None = None
+    report: Report = field(default=lambda _counter, _line: None)
+
+    def __post_init__(self) -> None:
+        self.tf = TfBuffer()
+        self.camera_info: Any = None
+        self.newest = -math.inf  # the robot's time: the newest stamp seen
+        self._waiting: collections.deque[_Waiting] = collections.deque()
+        self._pose_stamps: collections.deque[float] = collections.deque(maxlen=500)
+        self._placement = unlevelled(self.base_frame)
+        self._statics: list[Any] = []
+
+    def add_tf(self, msg: Any, *, static: bool) -> list[Pose]:
+        """A TFMessage; with a tf pose source, the robot's poses its stamps now cover."""
+        stamps = [header_stamp(t.header, 0) for t in msg.transforms]
+        if not static and stamps:
+            self._see(max(stamps))
+        added, _ = self.tf.add_message(msg, static=static)
+        if static:
+            self._statics.append(msg)  # kept across a restart: a bridge sends them once
+        if self.pose_source.kind != "tf" or static:
+            return []
+        self._pose_stamps.extend(s for child, s in added if child == self.pose_source.child)
+        return self._tf_poses()
+
+    def add_pose(self, msg: Any) -> Pose:
+        """An Odometry or pose message of the robot (an ``odom``/``pose`` source)."""
+        pose = pose_from_message(msg, 0, self.base_frame)
+        self._see(pose.stamp)
+        return self._placement.place(pose, np.eye(4))[0] or pose
+
+    def add_camera_info(self, msg: Any) -> None:
+        """The depth camera's intrinsics (the newest are used)."""
+        self.camera_info = msg
+
+    def add_sensor(self, msg: Any) -> None:
+        """A sensor message, to wait for its tf."""
+        stamp = header_stamp(msg.header, 0)
+        self._see(stamp)
+        if self.sensor_type == IMAGE and self.camera_info is None:
+            self.report("no_camera_info", "an image dropped: no CameraInfo yet")
+            return
+        if len(self._waiting) >= MAX_WAITING:
+            self._waiting.popleft()
+            self.report("overflow", f"a frame dropped: {MAX_WAITING} waited for their tf at once")
+        self._waiting.append(_Waiting(stamp, normalize_frame(msg.header.frame_id), msg))
+
+    def ready(self) -> list[SensorFrame]:
+        """The waiting messages whose tf has come, as frames, in order; the stale dropped."""
+        out, still = [], collections.deque()
+        for waiting in self._waiting:
+            frame = self._frame(waiting)
+            if frame is not None:
+                out.append(frame)
+            elif self.newest - waiting.stamp > self.tf_wait:
+                self.report("no_tf", self._missing(waiting))
+            else:
+                still.append(waiting)
+        self._waiting = still
+        return out
+
+    def _missing(self, waiting: _Waiting) -> str:
+        """Why a frame is dropped: the transform that did not come."""
+        needed = [(self.base_frame, waiting.frame_id)]
+        if self.pose_source.kind == "tf":
+            needed.append((self.pose_source.parent, self.pose_source.child))
+        for target, source in needed:
+            try:
+                self.tf.lookup(target, source, waiting.stamp)
+            except TfError as err:
+                return f"a frame dropped after {self.tf_wait:g} s without its tf: {err}"
+        return f"a frame dropped after {self.tf_wait:g} s without its tf"
+
+    def _see(self, stamp: float) -> None:
+        """The robot's time moved on; far back is a new session."""
+        if stamp < self.newest - CLOCK_JUMP:
+            self.report("restarts", f"the robot's clock went back {self.newest - stamp:.1f} s: "
+                        "a new session, started over")  # fmt: skip
+            self.tf = TfBuffer()
+            for msg in self._statics:
+                self.tf.add_message(msg, static=True)
+            self._waiting.clear()
+            self._pose_stamps.clear()
+            self.newest = stamp
+        self.newest = max(self.newest, stamp)
+
+    def _frame(self, waiting: _Waiting) -> SensorFrame | None:
+        """The frame of a waiting message, or None while its tf is missing."""
+        spec = self.pose_source
+        try:
+            mount = self.tf.lookup(self.base_frame, waiting.frame_id, waiting.stamp)
+            if spec.kind == "tf":  # the robot's tilt goes with the frame, as the player does it
+                matrix = self.tf.lookup(spec.parent, spec.child, waiting.stamp)
+                pose = pose_from_matrix(matrix, waiting.stamp, spec.parent, spec.child)
+                mount = self._placement.place(pose, mount)[1]
+        except TfError:
+            return None
+        read, height = self._reader(waiting.message)
+        points, band = hand_out(read, height, self.rows, mount, None)
+        return SensorFrame(waiting.stamp, waiting.frame_id, invalid_to_nan(np.array(points)),
+                           mount, band=band)  # fmt: skip
+
+    def _reader(self, msg: Any) -> tuple[Callable[[slice], np.ndarray], int]:
+        if self.sensor_type == POINTCLOUD2:
+            return (lambda rows: pointcloud2_xyz(msg, rows)), int(msg.height)
+        if self.sensor_type == LASERSCAN:
+            return (lambda _rows: laserscan_to_xyz(msg)), 1
+        info = self.camera_info
+        return (lambda rows: depth_image_to_xyz(msg, info, rows)), int(msg.height)
+
+    def _tf_poses(self) -> list[Pose]:
+        """Poses of the robot at the stamps of its own transform that the tree now covers."""
+        spec, poses, still = self.pose_source, [], collections.deque(maxlen=500)
+        for stamp in self._pose_stamps:
+            try:
+                matrix = self.tf.lookup(spec.parent, spec.child, stamp)
+            except TfError:
+                if self.newest - stamp <= self.tf_wait:
+                    still.append(stamp)
+                continue
+            pose = pose_from_matrix(matrix, stamp, spec.parent, spec.child)
+            poses.append(self._placement.place(pose, np.eye(4))[0] or pose)
+        self._pose_stamps = still
+        return poses

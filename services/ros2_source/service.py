@@ -1,0 +1,193 @@
+"""The live ROS 2 source: a robot's topics as CDR on Zenoh in, the player's frames and poses out.
+
+zenoh-bridge-ros2dds puts each ROS 2 topic ``/T`` on the key ``T`` (under its ``--namespace``),
+its messages as CDR bytes; ``tf_static`` is transient local, which the bridge answers from its
+cache, so it is asked for at start as well as subscribed to. The samples go from the
+subscribers' callbacks into one queue and are decoded, placed (``live.LiveFrames``) and
+published by the service's own thread, on the keys and in the payloads the player uses: the
+detector and the mapper cannot tell a live robot from a bag played in real time.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import uuid
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+from wallmap.common.codec import MessageError
+from wallmap.common.delivery import MAX_RATE, History, declare_history_publisher
+from wallmap.common.messages import Frame, Pose, pack
+from wallmap.common.ros2_types import ros2_typestore
+from wallmap.common.runtime import Presence, Stats, setup_logging
+from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.services.detector_rows import ask_rows
+from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN
+from wallmap.services.ros2_source.live import LiveFrames
+from wallmap.services.ros2_source.settings import Ros2Settings
+
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+QUEUE_DEPTH = 512  # samples waiting for the service's thread; beyond, the newest are dropped
+POSE_RATE = 200.0  # poses a second the history is sized for
+
+
+@dataclass(frozen=True)
+class _Sample:
+    kind: str  # sensor, camera_info, tf, tf_static, pose
+    payload: bytes
+
+
+class _Intake:
+    """The subscribers' callbacks: each sample into the queue, nothing else (never blocks)."""
+
+    def __init__(self, stats: Stats) -> None:
+        self.queue: queue.Queue[_Sample] = queue.Queue(maxsize=QUEUE_DEPTH)
+        self._stats = stats
+
+    def handler(self, kind: str) -> Any:
+        def put(sample: zenoh.Sample) -> None:
+            try:
+                self.queue.put_nowait(_Sample(kind, sample.payload.to_bytes()))
+            except queue.Full:
+                self._stats.add("queue_full")
+
+        return put
+
+
+def _subscriptions(ros2: Ros2Settings) -> dict[str, tuple[str, str]]:
+    """Sample kind -> (Zenoh key, message type) of everything the source listens to."""
+    topic, msgtype = ros2.sensor_topic_type()
+    found = {"sensor": (ros2.key(topic), msgtype), "tf": (ros2.key("tf"), TF_TYPE),
+             "tf_static": (ros2.key("tf_static"), TF_TYPE)}  # fmt: skip
+    if msgtype == IMAGE:
+        found["camera_info"] = (ros2.key(ros2.camera_info_topic()), CAMERA_INFO)
+    if (pose_topic := ros2.pose_topic()) is not None:
+        kind = ros2.pose_spec().kind
+        found["pose"] = (ros2.key(pose_topic), "nav_msgs/msg/Odometry" if kind == "odom" else "")
+    return found
+
+
+def run(
+    settings: ZenohSettings, ros2: Ros2Settings, stop: threading.Event, history: History | None
+) -> Stats:
+    """Until ``stop`` is set; returns the counters. PlayerError says what is wrong with a flag."""
+    log = setup_logging("ros2")
+    keys, stats, run_id = Keys(settings.prefix), Stats(log), uuid.uuid4().hex[:12]
+    subscriptions = _subscriptions(ros2)
+    _, msgtype = ros2.sensor_topic_type()
+    spec = ros2.pose_spec()
+    log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
+    with open_session(settings, count=stats.add, stop=stop) as session:
+        rows = None if ros2.whole_clouds or msgtype == LASERSCAN else ask_rows(session, keys)
+        live = LiveFrames(msgtype, spec, spec.child, ros2.tf_wait, rows,
+                          lambda counter, line: stats.note(counter, counter, line))  # fmt: skip
+        intake = _Intake(stats)
+        subscribers = [session.declare_subscriber(key, intake.handler(kind))
+                       for kind, (key, _) in subscriptions.items()]  # fmt: skip
+        outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
+        presence = Presence(session, keys, "ros2", stats, lambda: {"run": run_id})
+        for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):  # the bridge's cache
+            if reply.ok is not None:
+                intake.queue.put(_Sample("tf_static", reply.ok.payload.to_bytes()))
+        log.info(
+            "ready: %s -> %s, %s (poses from %s)",
+            ", ".join(key for key, _ in subscriptions.values()),
+            keys.frames,
+            keys.pose,
+            spec,
+        )
+        worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
+                                                      stop))  # fmt: skip
+        worker.start()
+        stop.wait()
+        worker.join()
+        log.info("stopping: %s", stats.snapshot())
+        presence.undeclare()
+        for subscriber in subscribers:
+            subscriber.undeclare()
+    return stats
+
+
+def _work(
+    intake: _Intake,
+    live: LiveFrames,
+    subscriptions: dict[str, tuple[str, str]],
+    outlet: _Outlet,
+    stats: Stats,
+    stop: threading.Event,
+) -> None:
+    """Decode, place and publish, in the order the samples came, until ``stop``."""
+    while not stop.is_set():
+        try:
+            sample = intake.queue.get(timeout=0.1)
+        except queue.Empty:
+            continue
+        key, msgtype = subscriptions[sample.kind]
+        try:
+            msg = _deserialize(sample.payload, msgtype or _pose_type(sample.payload))
+        except MessageError as err:
+            stats.refuse(key, str(err))
+            continue
+        if sample.kind in ("tf", "tf_static"):
+            outlet.poses(live.add_tf(msg, static=sample.kind == "tf_static"))
+        elif sample.kind == "camera_info":
+            live.add_camera_info(msg)
+        elif sample.kind == "pose":
+            outlet.poses([live.add_pose(msg)])
+        else:
+            live.add_sensor(msg)
+        for frame in live.ready():
+            outlet.frame(frame)
+            stats.add("frames")
+
+
+def _deserialize(payload: bytes, msgtype: str) -> Any:
+    try:
+        return ros2_typestore().deserialize_cdr(payload, msgtype)
+    except Exception as err:  # the CDR decoder raises many types for bad bytes
+        msg = f"not a CDR {msgtype} ({type(err).__name__}: {err})"
+        raise MessageError(msg) from err
+
+
+def _pose_type(payload: bytes) -> str:
+    """A ``pose`` topic's type: PoseWithCovarianceStamped if it decodes as one, else PoseStamped.
+
+    The two differ in length by the covariance's 36 doubles, so a PoseStamped's bytes are too
+    short to be read as the other.
+    """
+    try:
+        ros2_typestore().deserialize_cdr(payload, "geometry_msgs/msg/PoseWithCovarianceStamped")
+    except Exception:
+        return "geometry_msgs/msg/PoseStamped"
+    return "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+
+class _Outlet:
+    """The player's keys: frames and poses, with the history window for services that restart."""
+
+    def __init__(
+        self, session: zenoh.Session, keys: Keys, history: History, run_id: str, msgtype: str
+    ) -> None:
+        self._session, self._keys, self._history, self._run = session, keys, history, run_id
+        self._sensor = "scan" if msgtype == LASERSCAN else "depth"
+        self._poses = declare_history_publisher(session, keys.pose, history.samples(POSE_RATE))
+        self._frames: Any = None
+        self.published = 0
+
+    def poses(self, poses: list[Pose]) -> None:
+        for pose in poses:
+            self._poses.put(pack(pose))
+
+    def frame(self, frame: Any) -> None:
+        message = pack(Frame(
+            self._run, self.published, frame.stamp, frame.frame_id, frame.points,
+            frame.T_base_sensor, self._sensor, False, frame.band, frame.sweep,
+        ))  # fmt: skip
+        if self._frames is None:
+            samples = self._history.samples(MAX_RATE, len(message))
+            self._frames = declare_history_publisher(self._session, self._keys.frames, samples)
+        self._frames.put(message)
+        self.published += 1

@@ -1,0 +1,134 @@
+"""`wallmap ros2` maps a live ROS 2 robot from its topics on Zenoh (zenoh-bridge-ros2dds naming).
+
+The robot is a generated ROS 2 bag replayed in real time (here twice as fast) onto the bridge's
+keys: each message's own CDR bytes on the key of its topic (``/T`` -> ``NAMESPACE/T``), in the
+bag's order and at its pace; ``tf_static`` once at the start and answered to queries, as the
+bridge answers from its cache for a transient-local topic. A detector and a mapper take what
+`wallmap ros2` publishes; the walls are scored against the scene's truth.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+from conftest import Stack
+from rosbags.rosbag2 import Reader
+
+from wallmap.evaluation import evaluate_map
+
+SPEED = 2.0  # the robot's pace: twice real time, as the acceptance plays it
+SENSORS = {
+    "depth16": "camera/depth/image_raw:sensor_msgs/msg/Image",
+    "pointcloud": "camera/depth/points:sensor_msgs/msg/PointCloud2",
+    "laserscan": "scan:sensor_msgs/msg/LaserScan",
+}
+
+
+class Robot:
+    """A bag's messages on the bridge's keys, at ``SPEED`` times their recorded pace."""
+
+    def __init__(self, session: zenoh.Session, bag: Path, namespace: str) -> None:
+        self.session, self.bag, self.namespace = session, bag, namespace
+        self.sent: dict[str, int] = {}
+        self._static: bytes | None = None
+        self._cache = session.declare_queryable(self.key("tf_static"), self._answer)
+
+    def key(self, topic: str) -> str:
+        topic = topic.strip("/")
+        return f"{self.namespace}/{topic}" if self.namespace else topic
+
+    def _answer(self, query: zenoh.Query) -> None:
+        if self._static is not None:  # the bridge's cache of a transient-local topic
+            query.reply(query.key_expr, self._static)
+
+    def play(self, skip: tuple[str, ...] = ()) -> None:
+        """Every message but those of ``skip`` topics, in bag order, paced."""
+        with Reader(self.bag) as reader:
+            start_wall, start_bag = time.monotonic(), reader.start_time
+            for connection, stamp, raw in reader.messages():
+                if connection.topic in skip:
+                    continue
+                if connection.topic == "/tf_static":
+                    self._static = bytes(raw)
+                due = start_wall + (stamp - start_bag) * 1e-9 / SPEED
+                time.sleep(max(0.0, due - time.monotonic()))
+                self.session.put(self.key(connection.topic), bytes(raw))
+                self.sent[connection.topic] = self.sent.get(connection.topic, 0) + 1
+
+    def close(self) -> None:
+        self._cache.undeclare()
+
+
+def _wait_for(stack: Stack, service: str, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
+        if f'"service": "{service}"' in out.stdout:
+            return
+        time.sleep(0.2)
+    pytest.fail(f"no {service} came up")
+
+
+@pytest.mark.parametrize(
+    ("sensor", "namespace"), [("depth16", "robot1"), ("pointcloud", ""), ("laserscan", "robot1")]
+)
+def test_a_live_robot_is_mapped_from_its_topics(
+    stack: Stack, scene_bags, sensor: str, namespace: str
+) -> None:
+    info = scene_bags(f"live-{sensor}", seed=21, n_frames=120, fmt="ros2-mcap", sensor=sensor)
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    _wait_for(stack, "detector")
+    source = stack.start("ros2", "ros2", "--namespace", namespace, "--sensor", SENSORS[sensor],
+                         *stack.zenoh_args)  # fmt: skip
+    _wait_for(stack, "ros2")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", f'["{stack.endpoint}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as session:
+        robot = Robot(session, info.path, namespace)
+        try:
+            robot.play()
+        finally:
+            robot.close()
+    sent = robot.sent["/scan" if sensor == "laserscan" else f"/{SENSORS[sensor].split(':')[0]}"]
+    deadline = time.monotonic() + 20
+    reply = stack.query("--min-obs", "3")
+    while reply["frames"] < sent and time.monotonic() < deadline:
+        time.sleep(0.5)
+        reply = stack.query("--min-obs", "3")
+    assert reply["frames"] >= 0.95 * sent, f"{reply['frames']} of {sent} frames integrated"
+    score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
+    print(score.summary())
+    assert score.precision >= 0.98
+    assert score.recall >= 0.95
+    assert score.duplicates == 0
+    assert source.stop(sig=2) == 0  # Ctrl-C
+
+
+def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene_bags) -> None:
+    info = scene_bags("live-depth16", seed=21, n_frames=120, fmt="ros2-mcap", sensor="depth16")
+    source = stack.start("ros2", "ros2", "--sensor", SENSORS["depth16"], "--tf-wait", "0.5",
+                *stack.zenoh_args)  # fmt: skip
+    _wait_for(stack, "ros2")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", f'["{stack.endpoint}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as session:
+        robot = Robot(session, info.path, "")
+        try:
+            robot.play(skip=("/tf", "/tf_static"))  # no transform at all
+        finally:
+            robot.close()
+    time.sleep(1.0)
+    out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
+    counters = next(s for s in json.loads(out.stdout) if s["service"] == "ros2")["counters"]
+    assert counters.get("frames", 0) == 0
+    assert counters["no_tf"] >= 100, counters  # of 120 frames, all but the last tf_wait's
+    assert "without its tf" in source.output()

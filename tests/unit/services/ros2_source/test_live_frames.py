@@ -1,0 +1,104 @@
+"""A live robot's messages placed as the player places a bag's: waits for tf, drops, restarts."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wallmap.common.ros2_types import ros2_typestore
+from wallmap.services.player.bag_contents import IMAGE, LASERSCAN
+from wallmap.services.player.pose_sources import parse_pose_source
+from wallmap.services.ros2_source.live import LiveFrames
+
+T = ros2_typestore().types
+
+
+def _header(stamp: float, frame: str):
+    sec = math.floor(stamp)
+    time = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=round((stamp - sec) * 1e9))
+    return T["std_msgs/msg/Header"](stamp=time, frame_id=frame)
+
+
+def _tf(stamp: float, parent: str, child: str, x: float = 0.0, yaw: float = 0.0):
+    q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    v = T["geometry_msgs/msg/Vector3"](x=x, y=0.0, z=0.0)
+    transform = T["geometry_msgs/msg/Transform"](translation=v, rotation=q)
+    stamped = T["geometry_msgs/msg/TransformStamped"](
+        header=_header(stamp, parent), child_frame_id=child, transform=transform
+    )
+    return T["tf2_msgs/msg/TFMessage"](transforms=[stamped])
+
+
+def _scan(stamp: float, n: int = 90):
+    return T["sensor_msgs/msg/LaserScan"](
+        header=_header(stamp, "laser"), angle_min=-math.pi / 4, angle_max=math.pi / 4,
+        angle_increment=(math.pi / 2) / (n - 1), time_increment=0.0, scan_time=0.0,
+        range_min=0.1, range_max=10.0, ranges=np.full(n, 2.0, np.float32),
+        intensities=np.zeros(0, np.float32),
+    )  # fmt: skip
+
+
+def _live(pose: str = "tf") -> tuple[LiveFrames, list[tuple[str, str]]]:
+    reported: list[tuple[str, str]] = []
+    report = lambda counter, line: reported.append((counter, line))  # noqa: E731
+    return LiveFrames(LASERSCAN, parse_pose_source(pose), "base_link", 0.5, report=report), reported
+
+
+def test_a_scan_waits_for_its_tf_then_comes_out_mounted_and_its_pose_with_it() -> None:
+    live, reported = _live()
+    live.add_tf(_tf(0.0, "base_link", "laser", x=0.2), static=True)
+    live.add_sensor(_scan(1.0))
+    assert live.ready() == []  # no map -> base_link yet: it waits
+    poses = live.add_tf(_tf(0.9, "map", "base_link", x=1.0), static=False)
+    poses += live.add_tf(_tf(1.1, "map", "base_link", x=1.2, yaw=0.1), static=False)
+    frames = live.ready()
+    assert [f.stamp for f in frames] == [1.0]
+    np.testing.assert_allclose(frames[0].T_base_sensor[:3, 3], [0.2, 0.0, 0.0], atol=1e-12)
+    assert frames[0].points.shape == (1, 90, 3)
+    assert [(p.stamp, round(p.x, 6)) for p in poses] == [(0.9, 1.0), (1.1, 1.2)]
+    assert reported == []
+
+
+def test_a_scan_whose_tf_does_not_come_is_dropped_with_the_missing_transform() -> None:
+    live, reported = _live()
+    live.add_sensor(_scan(1.0))
+    live.add_sensor(_scan(1.2))
+    assert live.ready() == []
+    live.add_sensor(_scan(1.6))  # the robot's time is 0.6 s past the first
+    assert live.ready() == []
+    assert [counter for counter, _ in reported] == ["no_tf"]
+    assert "laser" in reported[0][1]
+    assert "0.5 s" in reported[0][1]
+
+
+def test_an_image_before_its_camera_info_is_dropped() -> None:
+    reported: list[tuple[str, str]] = []
+    live = LiveFrames(IMAGE, parse_pose_source("none"), report=lambda c, m: reported.append((c, m)))
+    image = T["sensor_msgs/msg/Image"](header=_header(1.0, "camera"), height=2, width=2,
+                                       encoding="16UC1", is_bigendian=0, step=4,
+                                       data=np.zeros(8, np.uint8))  # fmt: skip
+    live.add_sensor(image)
+    assert reported == [("no_camera_info", "an image dropped: no CameraInfo yet")]
+
+
+@pytest.mark.parametrize("pose", ["none", "odom"])
+def test_without_a_tf_pose_only_the_mount_is_waited_for(pose: str) -> None:
+    live, _ = _live(pose)
+    live.add_sensor(_scan(1.0))
+    assert live.ready() == []
+    live.add_tf(_tf(0.0, "base_link", "laser"), static=True)
+    assert [f.stamp for f in live.ready()] == [1.0]
+
+
+def test_a_clock_that_jumps_back_starts_over_and_keeps_the_static_transforms() -> None:
+    live, reported = _live()
+    live.add_tf(_tf(0.0, "base_link", "laser"), static=True)
+    live.add_tf(_tf(100.0, "map", "base_link"), static=False)
+    live.add_sensor(_scan(100.2))  # waits: map -> base_link ends at 100.0
+    live.add_tf(_tf(1.0, "map", "base_link"), static=False)  # a new session of the robot
+    assert [counter for counter, _ in reported] == ["restarts"]
+    live.add_tf(_tf(1.2, "map", "base_link", x=0.5), static=False)
+    live.add_sensor(_scan(1.1))
+    assert [f.stamp for f in live.ready()] == [1.1]  # the old frame is gone, the mount kept
