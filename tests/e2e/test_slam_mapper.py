@@ -42,6 +42,9 @@ def test_mapper_slam_publishes_the_corrected_pose_and_survives_a_restart(
                              "--rate", "4", "--wait-for", "detector,mapper",
                              *stack.zenoh_args)  # fmt: skip
         time.sleep(1.0 + 0.4 * N_FRAMES / 15.0 / 4)
+        deadline = time.monotonic() + 30  # a busy machine: the first save may come later
+        while not state.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
         mapper.kill()
         saved = json.loads(state.read_text())
         assert saved["slam"]["x"] is not None, "the state file carries the pose correction"
