@@ -4,8 +4,9 @@ A reader copies a block from the README or docs/ into a terminal. Every fenced b
 string is ``sh runnable`` is run by bash, the blocks of one page one after the other in one
 shell, top to bottom, in a folder holding what the docs assume the reader has: ``my.bag`` (a
 generated scene). The commands a block puts in the background (the services) are stopped as a
-supervisor would (SIGTERM) once the page's last block ends, and each must exit 0; the page
-must end with status 0; nothing may print a traceback; and what the page says it makes exists.
+supervisor would (SIGTERM, the last started first) once the page's last block ends, and each
+must exit 0; the page must end with status 0; nothing may print a traceback; and what the
+page says it makes exists.
 
 The blocks use the default endpoint, 127.0.0.1:7447, as written: nothing else in the tests does.
 """
@@ -26,13 +27,13 @@ from conftest import ROOT, assert_clean_exit, run_wallmap
 RUNNABLE = re.compile(r"^```sh runnable\n(.*?)^```", re.DOTALL | re.MULTILINE)
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
-# Stops what the page left running, and fails the page if any of it did not exit 0.
+# Stops what the page left running, the last started first (the router, started first, last),
+# and fails the page if any of it did not exit 0.
 EPILOGUE = """
 finish() {
   code=$?
-  pids=$(jobs -p)
-  for pid in $pids; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in $pids; do
+  for pid in $(jobs -p | tac); do
+    kill -TERM "$pid" 2>/dev/null || true
     wait "$pid" || { echo "docs: a background command exited $?" >&2; code=1; }
   done
   exit "$code"

@@ -10,6 +10,7 @@ bridge answers from its cache for a transient-local topic. A detector and a mapp
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -26,6 +27,9 @@ SENSORS = {
     "pointcloud": "camera/depth/points:sensor_msgs/msg/PointCloud2",
     "laserscan": "scan:sensor_msgs/msg/LaserScan",
 }
+
+
+SENSOR_TOPICS = {f"/{spec.split(':')[0]}" for spec in SENSORS.values()}
 
 
 class Robot:
@@ -45,12 +49,19 @@ class Robot:
         if self._static is not None:  # the bridge's cache of a transient-local topic
             query.reply(query.key_expr, self._static)
 
-    def play(self, skip: tuple[str, ...] = ()) -> None:
-        """Every message but those of ``skip`` topics, in bag order, paced."""
+    def play(self, skip: tuple[str, ...] = (), quiet: tuple[float, float] | None = None) -> None:
+        """Every message but those of ``skip`` topics, in bag order, paced.
+
+        ``quiet``: the sensor stays silent over this stretch (s from the start, the bag's time),
+        as a camera that stalls; the rest of the robot goes on.
+        """
         with Reader(self.bag) as reader:
             start_wall, start_bag = time.monotonic(), reader.start_time
             for connection, stamp, raw in reader.messages():
                 if connection.topic in skip:
+                    continue
+                since = (stamp - start_bag) * 1e-9
+                if quiet and connection.topic in SENSOR_TOPICS and quiet[0] <= since < quiet[1]:
                     continue
                 if connection.topic == "/tf_static":
                     self._static = bytes(raw)
@@ -109,6 +120,56 @@ def test_a_live_robot_is_mapped_from_its_topics(
     assert score.recall >= 0.95
     assert score.duplicates == 0
     assert source.stop(sig=2) == 0  # Ctrl-C
+
+
+def _client(stack: Stack) -> zenoh.Session:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", f'["{stack.endpoint}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene_bags) -> None:
+    """The camera silent for 1.5 s; then `wallmap ros2` stopped and started while the robot goes on.
+
+    What the robot sends while no source runs is lost (a bridge keeps no frames); the rest is
+    mapped as one run would map it.
+    """
+    info = scene_bags("live-depth16", seed=21, n_frames=120, fmt="ros2-mcap", sensor="depth16")
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    _wait_for(stack, "detector")
+    args = ("ros2", "--sensor", SENSORS["depth16"], *stack.zenoh_args)
+    first = stack.start("ros2", *args)
+    _wait_for(stack, "ros2")
+    image = "/camera/depth/image_raw"
+    with _client(stack) as session:
+        robot = Robot(session, info.path, "")
+        playing = threading.Thread(target=robot.play, kwargs={"quiet": (2.0, 3.5)})
+        playing.start()
+        while robot.sent.get(image, 0) < 70 and playing.is_alive():
+            time.sleep(0.05)
+        lost_from = robot.sent.get(image, 0)  # from here until the second is up
+        assert first.stop(sig=2) == 0
+        second = stack.start("ros2-again", *args)
+        _wait_for(stack, "ros2")
+        lost = robot.sent.get(image, 0) - lost_from
+        playing.join()
+        robot.close()
+    sent = robot.sent[image] - lost
+    deadline = time.monotonic() + 20
+    reply = stack.query("--min-obs", "3")
+    while reply["frames"] < 0.95 * sent and time.monotonic() < deadline:
+        time.sleep(0.5)
+        reply = stack.query("--min-obs", "3")
+    assert reply["frames"] >= 0.95 * sent, f"{reply['frames']} of {sent} frames integrated"
+    score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
+    print(score.summary())
+    assert score.precision >= 0.98
+    assert score.recall >= 0.9  # what the restart missed may be all a wall was seen in
+    assert score.duplicates == 0
+    assert second.stop() == 0
 
 
 def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene_bags) -> None:
