@@ -38,7 +38,7 @@ from wallmap.config import Config, resolve, to_plain, to_toml
 from wallmap.doctor import add_command as add_doctor_command
 from wallmap.export import write_geojson
 from wallmap.foxglove_cli import add_commands as add_foxglove_commands
-from wallmap.launcher import LaunchError, demo, up
+from wallmap.launcher import LaunchError, demo, up, up_live
 from wallmap.map_client import format_table, to_json
 from wallmap.options import (
     BAND,
@@ -49,6 +49,7 @@ from wallmap.options import (
     PLAYER,
     POSES,
     ROS2,
+    ROS2_TOPICS,
     SLAM,
     SOURCE,
     SPEED,
@@ -168,6 +169,14 @@ def _cmd_status(args: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_up(args: argparse.Namespace, config: Config) -> int:
+    if config.up.ros2:
+        if args.bag is not None:
+            raise PlayerError(f"--ros2 maps a live robot: give it no BAG ({args.bag})")
+        if config.ros2.sensor is None:
+            raise PlayerError("--ros2 needs --sensor TOPIC:TYPE: the robot's topic to map")
+        return up_live(config)
+    if args.bag is None:
+        raise PlayerError("a BAG to play is needed (or --ros2 and --sensor for a live robot)")
     if config.up.odometry and config.player.source.pose_source not in (None, "tf", "none"):
         msg = (
             "--odometry estimates the poses itself; "
@@ -252,13 +261,10 @@ def _cmd_config(_: argparse.Namespace, config: Config) -> int:
     return 0
 
 
-def _add_bag_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "bag",
-        type=Path,
-        metavar="BAG",
-        help="ROS 1 .bag file, ROS 2 bag folder, or TUM RGB-D folder (depth.txt, depth/*.png)",
-    )
+def _add_bag_argument(p: argparse.ArgumentParser, *, optional: bool = False) -> None:
+    what = "ROS 1 .bag file, ROS 2 bag folder, or TUM RGB-D folder (depth.txt, depth/*.png)"
+    p.add_argument("bag", type=Path, metavar="BAG", nargs="?" if optional else None,
+                   help=what + (" (not with --ros2)" if optional else ""))  # fmt: skip
 
 
 def _add_map_filters(p: argparse.ArgumentParser, *, min_obs: int = 1) -> None:
@@ -309,9 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for answers")
 
     p = add_command(sub, "up", "router + detector + mapper (+ odometry) + player, one machine",
-                    _cmd_up, SPEED, SOURCE, BAND, STATE, POSES, SLAM, UP, HISTORY,
+                    _cmd_up, SPEED, SOURCE, BAND, STATE, POSES, SLAM, UP, ROS2_TOPICS, HISTORY,
                     ZENOH)  # fmt: skip
-    _add_bag_argument(p)
+    _add_bag_argument(p, optional=True)
 
     p = add_command(sub, "plot", "draw the current map (.png or .svg)", _cmd_plot, ZENOH)
     p.add_argument("out", type=picture, metavar="OUT", help="output file, .png or .svg")

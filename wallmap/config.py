@@ -55,6 +55,8 @@ class UpSettings:
         json_out: Write the final map, with this configuration, as JSON to this file.
         picture: Draw the final map to this file (.png or .svg).
         truth: Score the map against a generated scene's ground truth (``wallmap scene``).
+        ros2: Map a live ROS 2 robot (``wallmap ros2``, the ``[ros2]`` section) instead of a
+            recording, until stopped.
     """
 
     odometry: bool = False
@@ -63,6 +65,7 @@ class UpSettings:
     json_out: Path | None = None
     picture: Path | None = None
     truth: Path | None = None
+    ros2: bool = False
 
     def __post_init__(self) -> None:
         require(self.min_obs >= 1, "min_obs", ">= 1", self.min_obs)

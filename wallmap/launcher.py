@@ -175,6 +175,37 @@ def up(config: Config, bag: Path) -> int:
     return 0
 
 
+def up_live(config: Config) -> int:
+    """Run router, mapper, detector and ``wallmap ros2`` on a live robot; the map when stopped.
+
+    ``--pose-source`` (the player's flag) goes to the live source; with ``up.odometry`` the
+    odometry service makes the poses and the source sends none.
+    """
+    pose_source = "none" if config.up.odometry else config.player.source.pose_source
+    ros2 = replace(config.ros2, pose_source=pose_source or config.ros2.pose_source)
+    config = replace(with_odometry_poses(config), ros2=ros2)
+    _check_endpoint(config.zenoh)
+    truth = _check_outputs(config.up, None)
+    env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
+    env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
+    stop = stop_on_signals()
+    with tempfile.TemporaryDirectory(prefix="wallmap-up-") as tmp:
+        path = Path(tmp) / "config.toml"
+        path.write_text(to_toml(config), encoding="utf-8")
+        with _processes(env) as procs:
+            listen = config.zenoh.connect[0]
+            procs.start("router", "router", "--config", str(path), "--listen", listen)
+            for name in ("mapper", "detector", *(("odometry",) if config.up.odometry else ())):
+                procs.start(name, name, "--config", str(path))
+            procs.start("ros2", "ros2", "--config", str(path))
+            print("mapping the live robot: Ctrl-C prints the map and stops", file=sys.stderr)
+            while not stop.is_set():
+                procs.check_running()
+                stop.wait(0.1)
+            _report(config, None, truth)
+    return 0
+
+
 def _check_endpoint(settings: ZenohSettings) -> None:
     """The endpoint ``up`` starts its router on: valid, and free (not another router's)."""
     make_config(settings)  # a malformed endpoint is one line, before anything starts
@@ -196,12 +227,12 @@ def _check_endpoint(settings: ZenohSettings) -> None:
             raise LaunchError(msg) from err
 
 
-def _check_outputs(options: UpSettings, bag: Path) -> Truth | None:
+def _check_outputs(options: UpSettings, bag: Path | None) -> Truth | None:
     """What ``up`` reads and writes, checked before anything starts; the truth, read.
 
     A wrong path fails now, in one line, not after the whole recording has played.
     """
-    if not bag.exists():
+    if bag is not None and not bag.exists():
         raise LaunchError(f"{bag} does not exist")
     for path in (options.json_out, options.picture):
         if path is not None and not path.parent.is_dir():
@@ -230,7 +261,9 @@ def _report_partial(config: Config, bag: Path, truth: Truth | None) -> None:
               file=sys.stderr)  # fmt: skip
 
 
-def _report(config: Config, bag: Path, truth: Truth | None, *, partial: bool = False) -> None:
+def _report(
+    config: Config, bag: Path | None, truth: Truth | None, *, partial: bool = False
+) -> None:
     """The final map: printed, scored, written as JSON (with the configuration), drawn.
 
     ``partial``: the run was stopped before the recording's end; the JSON says so.
@@ -250,7 +283,8 @@ def _report(config: Config, bag: Path, truth: Truth | None, *, partial: bool = F
     if reply.frames and not reply.observations:
         nothing = f"no line was seen in any of the {reply.frames} frames"
         why = "nothing in the band the detector reads, or the camera is read wrong"
-        ask = f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
+        ask = (f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
+               if bag is not None else "(the --sensor topic and its type)")  # fmt: skip
         print(f"wallmap up: {nothing}: {why} {ask}", file=sys.stderr)
     if truth is not None:
         plan, _, seen = truth

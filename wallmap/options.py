@@ -173,18 +173,22 @@ SOURCE = (
            "else TUM's 5000)", positive, metavar="N"),
 )  # fmt: skip
 
-ROS2 = (
+ROS2_TOPICS = (
     Option("--namespace", "ros2.namespace", "the bridge's --namespace: topic /T is the key "
-           "NAMESPACE/T", metavar="NS"),
+           "NAMESPACE/T (empty: none)", metavar="NS"),
     Option("--sensor", "ros2.sensor", "the sensor topic and its type: sensor_msgs/msg/Image "
            "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan",
            metavar="TOPIC:TYPE"),
     Option("--camera-info", "ros2.camera_info", "a depth image's CameraInfo topic (not set: "
            "camera_info beside the image)", metavar="TOPIC"),
-    Option("--pose-source", "ros2.pose_source", "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
-           "pose[:TOPIC] | none", metavar="SPEC"),
     Option("--tf-wait", "ros2.tf_wait", "seconds a sensor message waits for its tf, then is "
            "dropped and counted", positive, metavar="S"),
+)  # fmt: skip
+
+ROS2 = (
+    *ROS2_TOPICS,
+    Option("--pose-source", "ros2.pose_source", "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
+           "pose[:TOPIC] | none", metavar="SPEC"),
     Option("--whole-clouds", "ros2.whole_clouds", "send whole clouds, not only the rows the "
            "detector asks for", const=True),
 )  # fmt: skip
@@ -267,6 +271,8 @@ UP = (
     Option("--truth", "up.truth", "score the map against a scene's truth", Path, metavar="FILE"),
     Option("--odometry", "up.odometry", "estimate the poses from the scans (wallmap odometry), "
            "for bags without poses", const=True),
+    Option("--ros2", "up.ros2", "map a live ROS 2 robot (wallmap ros2: --sensor, --namespace...) "
+           "instead of a BAG, until Ctrl-C", const=True),
 )  # fmt: skip
 
 VIEW = (

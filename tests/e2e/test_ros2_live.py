@@ -10,13 +10,16 @@ bridge answers from its cache for a transient-local topic. A detector and a mapp
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import Stack
+from conftest import Stack, assert_clean_exit, free_port, run_wallmap
 from rosbags.rosbag2 import Reader
 
 from wallmap.evaluation import evaluate_map
@@ -193,3 +196,46 @@ def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene
     assert counters.get("frames", 0) == 0
     assert counters["no_tf"] >= 100, counters  # of 120 frames, all but the last tf_wait's
     assert "without its tf" in source.output()
+
+
+def test_up_maps_a_live_robot_until_stopped(tmp_path: Path, scene_bags) -> None:
+    """`wallmap up --ros2`: router, detector, mapper and the live source in one command."""
+    info = scene_bags("live-laserscan", seed=21, n_frames=120, fmt="ros2-mcap", sensor="laserscan")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    zenoh_args = ("--connect", endpoint, "--prefix", "test/up-ros2")
+    out = tmp_path / "map.json"
+    log = tmp_path / "up.log"
+    up = subprocess.Popen(
+        [sys.executable, "-m", "wallmap", "up", "--ros2", "--namespace", "robot1",
+         "--sensor", SENSORS["laserscan"], "--json-out", str(out), *zenoh_args],
+        stdout=log.open("wb"), stderr=subprocess.STDOUT,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while '"ros2"' not in run_wallmap("status", "--json", *zenoh_args, expect=None).stdout:
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.3)
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        with zenoh.open(conf) as session:
+            robot = Robot(session, info.path, "robot1")
+            try:
+                robot.play()
+            finally:
+                robot.close()
+        time.sleep(2.0)  # the last frames through the detector and the mapper
+        up.send_signal(signal.SIGINT)
+        code = up.wait(timeout=60)
+    finally:
+        if up.poll() is None:
+            up.kill()
+    assert_clean_exit("wallmap up --ros2", code, log.read_text())
+    reply = json.loads(out.read_text())
+    assert reply["frames"] >= 0.95 * robot.sent["/scan"], reply["frames"]
+    score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
+    print(score.summary())
+    assert score.precision >= 0.98
+    assert score.recall >= 0.95
+    assert score.duplicates == 0
