@@ -44,6 +44,7 @@ def fetch_status(session: zenoh.Session, keys: Keys, timeout: float = 2.0) -> li
             "uptime": counters.get(name, {}).get("uptime"),
             "counters": counters.get(name, {}).get("counters", {}),
             **({"pose_source": s} if (s := counters.get(name, {}).get("pose_source")) else {}),
+            **{k: counters[name][k] for k in ("topics", "missing") if k in counters.get(name, {})},
         }
         for name in live
     ]
@@ -61,6 +62,12 @@ def format_status(services: list[dict[str, Any]], prefix: str) -> str:
         lines.append(f"{entry['service']:<{width}}  {uptime:>8}  {counters}")
         if isinstance(entry.get("pose_source"), dict):
             lines.append(f"{'':<{width}}  {'':>8}  {describe_pose_source(entry['pose_source'])}")
+        for key, seen in dict(entry.get("topics") or {}).items():  # a live source's topics
+            last = "never" if seen["last_s"] is None else f"last {seen['last_s']} s ago"
+            lines.append(f"{'':<{width}}  {'':>8}  {key}: {seen['messages']} messages, "
+                         f"{seen['hz']} Hz, {last}")  # fmt: skip
+        for problem in entry.get("missing") or ():
+            lines.append(f"{'':<{width}}  {'':>8}  missing: {problem}")
     return "\n".join(lines)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 import uuid
 from dataclasses import dataclass
 from typing import Any
@@ -28,6 +29,7 @@ from wallmap.services.detector_rows import ask_rows
 from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN
 from wallmap.services.ros2_source.live import LiveFrames
 from wallmap.services.ros2_source.settings import Ros2Settings
+from wallmap.services.ros2_source.topic_watch import TopicWatch
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 QUEUE_DEPTH = 512  # samples waiting for the service's thread; beyond, the newest are dropped
@@ -85,10 +87,12 @@ def run(
         live = LiveFrames(msgtype, spec, spec.child, ros2.tf_wait, rows,
                           lambda counter, line: stats.note(counter, counter, line))  # fmt: skip
         intake = _Intake(stats)
+        watch = TopicWatch({kind: key for kind, (key, _) in subscriptions.items()})
         subscribers = [session.declare_subscriber(key, intake.handler(kind))
                        for kind, (key, _) in subscriptions.items()]  # fmt: skip
         outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
-        presence = Presence(session, keys, "ros2", stats, lambda: {"run": run_id})
+        presence = Presence(session, keys, "ros2", stats,
+                            lambda: {"run": run_id, **watch.report(time.monotonic())})  # fmt: skip
         for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):  # the bridge's cache
             if reply.ok is not None:
                 intake.queue.put(_Sample("tf_static", reply.ok.payload.to_bytes()))
@@ -100,7 +104,7 @@ def run(
             spec,
         )
         worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
-                                                      stop))  # fmt: skip
+                                                      watch, stop))  # fmt: skip
         worker.start()
         stop.wait()
         worker.join()
@@ -117,6 +121,7 @@ def _work(
     subscriptions: dict[str, tuple[str, str]],
     outlet: _Outlet,
     stats: Stats,
+    watch: TopicWatch,
     stop: threading.Event,
 ) -> None:
     """Decode, place and publish, in the order the samples came, until ``stop``."""
@@ -125,6 +130,7 @@ def _work(
             sample = intake.queue.get(timeout=0.1)
         except queue.Empty:
             continue
+        watch.heard(sample.kind, time.monotonic())
         key, msgtype = subscriptions[sample.kind]
         try:
             msg = _deserialize(sample.payload, msgtype or _pose_type(sample.payload))

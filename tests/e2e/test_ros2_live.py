@@ -110,6 +110,10 @@ def test_a_live_robot_is_mapped_from_its_topics(
             robot.play()
         finally:
             robot.close()
+    heard = _status_of(stack, "ros2")
+    sensor_key = f"{namespace}/{SENSORS[sensor].split(':')[0]}".strip("/")
+    assert heard["topics"][sensor_key]["messages"] == 120, heard
+    assert heard["missing"] == [], heard
     sent = robot.sent["/scan" if sensor == "laserscan" else f"/{SENSORS[sensor].split(':')[0]}"]
     deadline = time.monotonic() + 20
     reply = stack.query("--min-obs", "3")
@@ -123,6 +127,11 @@ def test_a_live_robot_is_mapped_from_its_topics(
     assert score.recall >= 0.95
     assert score.duplicates == 0
     assert source.stop(sig=2) == 0  # Ctrl-C
+
+
+def _status_of(stack: Stack, service: str) -> dict:
+    out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
+    return next(s for s in json.loads(out.stdout) if s["service"] == service)
 
 
 def _client(stack: Stack) -> zenoh.Session:
@@ -191,8 +200,9 @@ def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene
         finally:
             robot.close()
     time.sleep(1.0)
-    out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
-    counters = next(s for s in json.loads(out.stdout) if s["service"] == "ros2")["counters"]
+    heard = _status_of(stack, "ros2")
+    assert "tf: nothing heard" in heard["missing"], heard
+    counters = heard["counters"]
     assert counters.get("frames", 0) == 0
     assert counters["no_tf"] >= 100, counters  # of 120 frames, all but the last tf_wait's
     assert "without its tf" in source.output()
