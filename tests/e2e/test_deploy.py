@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import ROOT, free_port, run_wallmap, wait_for_port
+from live_robot import SENSORS, Robot, client
 
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import load_truth, write_scene_bag
@@ -66,8 +67,9 @@ def compose_commands() -> dict[str, list[str]]:
 def test_compose_and_dockerfile_are_consistent():
     compose = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
     services = compose["services"]
-    assert set(services) == {"router", "mapper", "detector", "odometry", "player"}
+    assert set(services) == {"router", "mapper", "detector", "odometry", "ros2", "player"}
     assert services["odometry"]["profiles"] == ["odometry"], "only for bags without poses"
+    assert services["ros2"]["profiles"] == ["live"], "only for a live robot"
     assert services["router"]["build"] == "."
     for name, svc in services.items():
         assert svc["image"] == "wallmap:latest", name
@@ -125,7 +127,7 @@ def test_compose_services_run_as_processes(tmp_path):
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     commands = {k: localise(v, endpoint, tmp_path) for k, v in compose_commands().items()}
-    del commands["odometry"]  # its profile is off by default
+    del commands["odometry"], commands["ros2"]  # their profiles are off by default
     procs: dict[str, subprocess.Popen[bytes]] = {}
     logs = {name: tmp_path / f"{name}.log" for name in commands}
 
@@ -217,3 +219,50 @@ def test_compose_odometry_profile_maps_a_bag_without_poses(tmp_path):
             if name in procs and procs[name].poll() is None:
                 procs[name].terminate()
                 procs[name].wait(timeout=15)
+
+
+def test_compose_live_profile_maps_a_live_robot(tmp_path):
+    """`docker-compose --profile live up router mapper detector ros2`, as documented, on a robot
+    that sends a laser scan under the namespace robot1 (tests/live_robot.py)."""
+    info = write_scene_bag(
+        tmp_path / "live", seed=21, n_frames=120, fmt="ros2-mcap", sensor="laserscan"
+    )
+    env = {"WALLMAP_NAMESPACE": "robot1", "WALLMAP_SENSOR": SENSORS["laserscan"]}
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    commands = {k: localise(v, endpoint, tmp_path, env) for k, v in compose_commands().items()}
+    procs = {}
+    try:
+        for name in ("router", "mapper", "detector", "ros2"):
+            log = (tmp_path / f"{name}.log").open("wb")
+            procs[name] = subprocess.Popen(
+                [sys.executable, "-m", "wallmap", *commands[name]], stdout=log, stderr=log
+            )
+            if name == "router":
+                wait_for_port(port)
+        deadline = time.monotonic() + 60
+        while '"ros2"' not in run_wallmap("status", "--json", "--connect", endpoint).stdout:
+            assert time.monotonic() < deadline, (tmp_path / "ros2.log").read_text()
+            time.sleep(0.3)
+        with client(endpoint) as session:
+            robot = Robot(session, info.path, "robot1")
+            try:
+                robot.play()
+            finally:
+                robot.close()
+        deadline = time.monotonic() + 20
+        reply = json.loads(run_wallmap("query", "--json", "--min-obs", "3", "--connect",
+                                       endpoint).stdout)  # fmt: skip
+        while reply["frames"] < 0.95 * robot.sent["/scan"] and time.monotonic() < deadline:
+            time.sleep(0.5)
+            reply = json.loads(run_wallmap("query", "--json", "--min-obs", "3", "--connect",
+                                           endpoint).stdout)  # fmt: skip
+        assert reply["frames"] >= 0.95 * robot.sent["/scan"], reply["frames"]
+        score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
+        assert score.precision >= 0.98, score.summary()
+        assert score.recall >= 0.95, score.summary()
+    finally:
+        for name in ("ros2", "detector", "mapper", "router"):
+            if name in procs and procs[name].poll() is None:
+                procs[name].terminate()
+                assert procs[name].wait(timeout=15) == 0, (tmp_path / f"{name}.log").read_text()
