@@ -8,9 +8,11 @@ as the bridge answers from its cache for a transient-local topic.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
+from conftest import run_wallmap
 from rosbags.rosbag2 import Reader
 
 SPEED = 2.0  # the robot's pace: twice real time, as the acceptance plays it
@@ -73,3 +75,36 @@ def client(endpoint: str) -> zenoh.Session:
     conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(conf)
+
+
+def mapped(query: Callable[[], dict], sent: int, share: float = 0.95) -> dict:
+    """The map reply once ``share`` of the ``sent`` frames are integrated (20 s at most), checked.
+
+    The last frames are still on their way through the detector and the mapper when the robot
+    is done; a bridge may drop a few large ones, as a real one does.
+    """
+    deadline = time.monotonic() + 20
+    reply = query()
+    while reply["frames"] < share * sent and time.monotonic() < deadline:
+        time.sleep(0.5)
+        reply = query()
+    assert reply["frames"] >= share * sent, f"{reply['frames']} of {sent} frames integrated"
+    return reply
+
+
+def play_to_the_source(endpoint: str, prefix_args: tuple[str, ...], bag: Path, namespace: str,
+                       log: Path) -> Robot:  # fmt: skip
+    """Once `wallmap ros2` is live on ``endpoint`` (60 s at most; ``log`` says why not), the bag
+    played to it; the robot, with what it sent."""
+    deadline = time.monotonic() + 60
+    status = ("status", "--json", "--connect", endpoint, *prefix_args)
+    while '"ros2"' not in run_wallmap(*status, expect=None).stdout:
+        assert time.monotonic() < deadline, log.read_text()
+        time.sleep(0.3)
+    with client(endpoint) as session:
+        robot = Robot(session, bag, namespace)
+        try:
+            robot.play()
+        finally:
+            robot.close()
+    return robot

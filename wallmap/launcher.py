@@ -141,37 +141,45 @@ def for_services(config: Config) -> Config:
     return replace(config, player=player)
 
 
-def up(config: Config, bag: Path) -> int:
-    """Run router, mapper, detector and player; print the map when the bag is done."""
-    config = for_services(config)
-    _check_endpoint(config.zenoh)
-    truth = _check_outputs(config.up, bag)
+@contextlib.contextmanager
+def _core_services(config: Config) -> Iterator[tuple[_Services, Path]]:
+    """Router, mapper, detector (and odometry) on one configuration file; stopped at the end.
+
+    Yields the running services and the file, for the source that feeds them.
+    """
     env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
     env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
-    stop = stop_on_signals()
     with tempfile.TemporaryDirectory(prefix="wallmap-up-") as tmp:
         path = Path(tmp) / "config.toml"
         path.write_text(to_toml(config), encoding="utf-8")
         with _processes(env) as procs:
             listen = config.zenoh.connect[0]
             procs.start("router", "router", "--config", str(path), "--listen", listen)
-            procs.start("mapper", "mapper", "--config", str(path))
-            procs.start("detector", "detector", "--config", str(path))
-            if config.up.odometry:
-                procs.start("odometry", "odometry", "--config", str(path))
-            player = procs.start("player", "player", str(bag), "--config", str(path))
-            while player.poll() is None and not stop.is_set():
-                procs.check_running()
-                stop.wait(0.1)
-            if stop.is_set():  # asked to stop (Ctrl-C, SIGTERM): the map so far, then stop
-                _report_partial(config, bag, truth)
-                return 0
-            if player.returncode != 0:
-                return player.returncode
-            _report(config, bag, truth)
-            if not config.up.exit_when_done:
-                print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
-                stop.wait()
+            for name in ("mapper", "detector", *(("odometry",) if config.up.odometry else ())):
+                procs.start(name, name, "--config", str(path))
+            yield procs, path
+
+
+def up(config: Config, bag: Path) -> int:
+    """Run router, mapper, detector and player; print the map when the bag is done."""
+    config = for_services(config)
+    _check_endpoint(config.zenoh)
+    truth = _check_outputs(config.up, bag)
+    stop = stop_on_signals()
+    with _core_services(config) as (procs, path):
+        player = procs.start("player", "player", str(bag), "--config", str(path))
+        while player.poll() is None and not stop.is_set():
+            procs.check_running()
+            stop.wait(0.1)
+        if stop.is_set():  # asked to stop (Ctrl-C, SIGTERM): the map so far, then stop
+            _report_partial(config, bag, truth)
+            return 0
+        if player.returncode != 0:
+            return player.returncode
+        _report(config, bag, truth)
+        if not config.up.exit_when_done:
+            print("the services keep running: `wallmap query` reads the map; Ctrl-C stops them")
+            stop.wait()
     return 0
 
 
@@ -186,23 +194,14 @@ def up_live(config: Config) -> int:
     config = replace(with_odometry_poses(config), ros2=ros2)
     _check_endpoint(config.zenoh)
     truth = _check_outputs(config.up, None)
-    env = {k: v for k, v in os.environ.items() if k not in ("WALLMAP_CONNECT", "WALLMAP_PREFIX")}
-    env["WALLMAP_LOG"] = os.environ.get("WALLMAP_LOG", "WARNING")
     stop = stop_on_signals()
-    with tempfile.TemporaryDirectory(prefix="wallmap-up-") as tmp:
-        path = Path(tmp) / "config.toml"
-        path.write_text(to_toml(config), encoding="utf-8")
-        with _processes(env) as procs:
-            listen = config.zenoh.connect[0]
-            procs.start("router", "router", "--config", str(path), "--listen", listen)
-            for name in ("mapper", "detector", *(("odometry",) if config.up.odometry else ())):
-                procs.start(name, name, "--config", str(path))
-            procs.start("ros2", "ros2", "--config", str(path))
-            print("mapping the live robot: Ctrl-C prints the map and stops", file=sys.stderr)
-            while not stop.is_set():
-                procs.check_running()
-                stop.wait(0.1)
-            _report(config, None, truth)
+    with _core_services(config) as (procs, path):
+        procs.start("ros2", "ros2", "--config", str(path))
+        print("mapping the live robot: Ctrl-C prints the map and stops", file=sys.stderr)
+        while not stop.is_set():
+            procs.check_running()
+            stop.wait(0.1)
+        _report(config, None, truth)
     return 0
 
 

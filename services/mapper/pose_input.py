@@ -17,7 +17,7 @@ import numpy as np
 
 from wallmap.common.codec import MessageError
 from wallmap.common.messages import Pose, unpack_pose
-from wallmap.common.ros2_types import ros2_typestore
+from wallmap.common.ros2_types import deserialize_cdr
 from wallmap.common.ros_poses import (
     DEFAULT_CHILD,
     DEFAULT_PARENT,
@@ -51,14 +51,6 @@ class WallmapPoses:
         return [unpack_pose(payload)]
 
 
-def _deserialize(payload: bytes, msgtype: str) -> object:
-    try:
-        return ros2_typestore().deserialize_cdr(payload, msgtype)
-    except Exception as err:  # the CDR decoder raises many types for bad bytes
-        msg = f"not a CDR {msgtype} ({type(err).__name__}: {err})"
-        raise MessageError(msg) from err
-
-
 def _checked(pose: Pose) -> Pose:
     if not np.isfinite([pose.stamp, pose.x, pose.y, pose.yaw]).all():
         msg = "pose holds non-finite numbers"
@@ -77,7 +69,7 @@ class RosPoses:
 
     def decode(self, payload: bytes, key: str) -> list[Pose]:
         """One pose, stamped from the header (or the arrival time when the header has none)."""
-        msg = _deserialize(payload, self.msgtype)
+        msg = deserialize_cdr(payload, self.msgtype)
         return [_checked(pose_from_message(msg, time.time_ns(), DEFAULT_CHILD))]
 
 
@@ -96,7 +88,7 @@ class RosTfPoses:
 
     def decode(self, payload: bytes, key: str) -> list[Pose]:
         """Add the transforms; return the poses of every waiting stamp the tree now covers."""
-        msg = _deserialize(payload, TF_TYPE)
+        msg = deserialize_cdr(payload, TF_TYPE)
         static = key.rstrip("/").endswith("tf_static")
         added, refused = self.tf.add_message(msg, static=static)
         if refused:

@@ -22,7 +22,7 @@ import zenoh
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import MAX_RATE, History, declare_history_publisher
 from wallmap.common.messages import Frame, Pose, pack
-from wallmap.common.ros2_types import ros2_typestore
+from wallmap.common.ros2_types import deserialize_cdr, ros2_typestore
 from wallmap.common.runtime import Presence, Stats, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector_rows import ask_rows
@@ -133,7 +133,7 @@ def _work(
         watch.heard(sample.kind, time.monotonic())
         key, msgtype = subscriptions[sample.kind]
         try:
-            msg = _deserialize(sample.payload, msgtype or _pose_type(sample.payload))
+            msg = deserialize_cdr(sample.payload, msgtype or _pose_type(sample.payload))
         except MessageError as err:
             stats.refuse(key, str(err))
             continue
@@ -148,14 +148,6 @@ def _work(
         for frame in live.ready():
             outlet.frame(frame)
             stats.add("frames")
-
-
-def _deserialize(payload: bytes, msgtype: str) -> Any:
-    try:
-        return ros2_typestore().deserialize_cdr(payload, msgtype)
-    except Exception as err:  # the CDR decoder raises many types for bad bytes
-        msg = f"not a CDR {msgtype} ({type(err).__name__}: {err})"
-        raise MessageError(msg) from err
 
 
 def _pose_type(payload: bytes) -> str:

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import ROOT, free_port, run_wallmap, wait_for_port
-from live_robot import SENSORS, Robot, client
+from live_robot import SENSORS, mapped, play_to_the_source
 
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import load_truth, write_scene_bag
@@ -240,24 +240,9 @@ def test_compose_live_profile_maps_a_live_robot(tmp_path):
             )
             if name == "router":
                 wait_for_port(port)
-        deadline = time.monotonic() + 60
-        while '"ros2"' not in run_wallmap("status", "--json", "--connect", endpoint).stdout:
-            assert time.monotonic() < deadline, (tmp_path / "ros2.log").read_text()
-            time.sleep(0.3)
-        with client(endpoint) as session:
-            robot = Robot(session, info.path, "robot1")
-            try:
-                robot.play()
-            finally:
-                robot.close()
-        deadline = time.monotonic() + 20
-        reply = json.loads(run_wallmap("query", "--json", "--min-obs", "3", "--connect",
-                                       endpoint).stdout)  # fmt: skip
-        while reply["frames"] < 0.95 * robot.sent["/scan"] and time.monotonic() < deadline:
-            time.sleep(0.5)
-            reply = json.loads(run_wallmap("query", "--json", "--min-obs", "3", "--connect",
-                                           endpoint).stdout)  # fmt: skip
-        assert reply["frames"] >= 0.95 * robot.sent["/scan"], reply["frames"]
+        robot = play_to_the_source(endpoint, (), info.path, "robot1", tmp_path / "ros2.log")
+        query = ("query", "--json", "--min-obs", "3", "--connect", endpoint)
+        reply = mapped(lambda: json.loads(run_wallmap(*query).stdout), robot.sent["/scan"])
         score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
         assert score.precision >= 0.98, score.summary()
         assert score.recall >= 0.95, score.summary()

@@ -18,8 +18,8 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import Stack, assert_clean_exit, free_port, run_wallmap
-from live_robot import SENSORS, Robot, client
+from conftest import Stack, assert_clean_exit, free_port
+from live_robot import SENSORS, Robot, client, mapped, play_to_the_source
 
 from wallmap.evaluation import evaluate_map
 
@@ -58,12 +58,7 @@ def test_a_live_robot_is_mapped_from_its_topics(
     assert heard["topics"][sensor_key]["messages"] >= 0.95 * 120, heard  # big clouds may drop
     assert not [m for m in heard["missing"] if "nothing heard" in m], heard
     sent = robot.sent["/scan" if sensor == "laserscan" else f"/{SENSORS[sensor].split(':')[0]}"]
-    deadline = time.monotonic() + 20
-    reply = stack.query("--min-obs", "3")
-    while reply["frames"] < sent and time.monotonic() < deadline:
-        time.sleep(0.5)
-        reply = stack.query("--min-obs", "3")
-    assert reply["frames"] >= 0.95 * sent, f"{reply['frames']} of {sent} frames integrated"
+    reply = mapped(lambda: stack.query("--min-obs", "3"), sent)
     score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
     print(score.summary())
     assert score.precision >= 0.98
@@ -105,12 +100,7 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
         playing.join()
         robot.close()
     sent = robot.sent[image] - lost
-    deadline = time.monotonic() + 20
-    reply = stack.query("--min-obs", "3")
-    while reply["frames"] < 0.95 * sent and time.monotonic() < deadline:
-        time.sleep(0.5)
-        reply = stack.query("--min-obs", "3")
-    assert reply["frames"] >= 0.95 * sent, f"{reply['frames']} of {sent} frames integrated"
+    reply = mapped(lambda: stack.query("--min-obs", "3"), sent)
     score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
     print(score.summary())
     assert score.precision >= 0.98
@@ -152,16 +142,7 @@ def test_up_maps_a_live_robot_until_stopped(tmp_path: Path, scene_bags) -> None:
         stdout=log.open("wb"), stderr=subprocess.STDOUT,
     )  # fmt: skip
     try:
-        deadline = time.monotonic() + 60
-        while '"ros2"' not in run_wallmap("status", "--json", *zenoh_args, expect=None).stdout:
-            assert time.monotonic() < deadline, log.read_text()
-            time.sleep(0.3)
-        with client(endpoint) as session:
-            robot = Robot(session, info.path, "robot1")
-            try:
-                robot.play()
-            finally:
-                robot.close()
+        robot = play_to_the_source(endpoint, zenoh_args[2:], info.path, "robot1", log)
         time.sleep(2.0)  # the last frames through the detector and the mapper
         up.send_signal(signal.SIGINT)
         code = up.wait(timeout=60)
