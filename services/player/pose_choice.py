@@ -133,7 +133,7 @@ def choose_poses(
             return track
     warnings = []
     if base_frame is None:
-        spec, warnings = _moving_frame(contents.tf, spec, sensor_frame)
+        spec, warnings = follow_the_sensor(contents.tf, spec, sensor_frame)
     base = _base_frame(spec, base_frame, track)
     if spec.kind == "tf" and not contents.tf.has_path(spec.parent, base):
         reason = (
@@ -176,7 +176,7 @@ def _topic_track(contents: BagContents, spec: PoseSourceSpec, child: str) -> Pos
     return track if track.child else dataclasses.replace(track, child=child)
 
 
-def _moving_frame(
+def follow_the_sensor(
     tf: TfBuffer, spec: PoseSourceSpec, sensor_frame: str
 ) -> tuple[PoseSourceSpec, list[str]]:
     """Without ``base_link`` in tf, the plain ``tf`` source follows the chain to the sensor.

@@ -30,6 +30,7 @@ from wallmap.services.player.frames import SensorFrame, hand_out
 from wallmap.services.player.laserscan import laserscan_to_xyz
 from wallmap.services.player.placement import unlevelled
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
+from wallmap.services.player.pose_choice import follow_the_sensor
 from wallmap.services.player.pose_sources import PoseSourceSpec
 
 MAX_WAITING = 64  # sensor messages waiting for their tf at most; the oldest gives way
@@ -117,14 +118,32 @@ class LiveFrames:
         out, still = [], collections.deque()
         for waiting in self._waiting:
             frame = self._frame(waiting)
+            if frame is None and self.newest - waiting.stamp > self.tf_wait:
+                frame = self._frame(waiting) if self._follow_the_sensor(waiting) else None
+                if frame is None:
+                    self.report("no_tf", self._missing(waiting))
+                    continue
             if frame is not None:
                 out.append(frame)
-            elif self.newest - waiting.stamp > self.tf_wait:
-                self.report("no_tf", self._missing(waiting))
             else:
                 still.append(waiting)
         self._waiting = still
         return out
+
+    def _follow_the_sensor(self, waiting: _Waiting) -> bool:
+        """Whether the plain ``tf`` source, still without ``map -> base_link``, changed.
+
+        After ``tf_wait``, the poses become those of the frame that carries the sensor, from the
+        first of REP-105's fixed frames that has one (``odom`` on a robot without a localiser),
+        as the player does for a bag (``follow_the_sensor``).
+        """
+        spec, warnings = follow_the_sensor(self.tf, self.pose_source, waiting.frame_id)
+        if not warnings:
+            return False
+        self.report("pose_source_changed", warnings[0])
+        self.pose_source, self.base_frame = spec, spec.child
+        self._placement = unlevelled(spec.child)
+        return True
 
     def _missing(self, waiting: _Waiting) -> str:
         """Why a frame is dropped: the transform that did not come."""

@@ -102,3 +102,20 @@ def test_a_clock_that_jumps_back_starts_over_and_keeps_the_static_transforms() -
     live.add_tf(_tf(1.2, "map", "base_link", x=0.5), static=False)
     live.add_sensor(_scan(1.1))
     assert [f.stamp for f in live.ready()] == [1.1]  # the old frame is gone, the mount kept
+
+
+def test_without_a_map_frame_the_poses_are_taken_in_odom_after_the_wait() -> None:
+    live, reported = _live()
+    live.add_tf(_tf(0.0, "base_link", "laser"), static=True)
+    poses, frames = [], []
+    for k in range(11):  # a robot without a localiser: odom -> base_link only
+        poses += live.add_tf(_tf(1.0 + 0.1 * k, "odom", "base_link", x=0.1 * k), static=False)
+        live.add_sensor(_scan(1.0 + 0.1 * k))
+        frames += live.ready()
+        if k < 5:  # map -> base_link is what the source waits for, for tf_wait...
+            assert (frames, poses) == ([], [])
+    # ...then it takes the poses in odom, says so once, and loses no frame.
+    assert [counter for counter, _ in reported] == ["pose_source_changed"]
+    assert "tf:odom>base_link" in reported[0][1]
+    assert [round(f.stamp, 1) for f in frames] == [round(1.0 + 0.1 * k, 1) for k in range(11)]
+    assert {p.frame for p in poses} == {"odom"}
