@@ -76,7 +76,7 @@ class LiveFrames:
         self._waiting: collections.deque[_Waiting] = collections.deque()
         self._pose_stamps: collections.deque[float] = collections.deque(maxlen=500)
         self._placement = unlevelled(self.base_frame)
-        self._statics: list[Any] = []
+        self._statics: dict[tuple[str, ...], Any] = {}
 
     def add_tf(self, msg: Any, *, static: bool) -> list[Pose]:
         """A TFMessage; with a tf pose source, the robot's poses its stamps now cover."""
@@ -84,8 +84,8 @@ class LiveFrames:
         if not static and stamps:
             self._see(max(stamps))
         added, _ = self.tf.add_message(msg, static=static)
-        if static:
-            self._statics.append(msg)  # kept across a restart: a bridge sends them once
+        if static:  # kept across a restart (a bridge sends them once), the newest of each
+            self._statics[tuple(normalize_frame(t.child_frame_id) for t in msg.transforms)] = msg
         if self.pose_source.kind != "tf" or static:
             return []
         self._pose_stamps.extend(s for child, s in added if child == self.pose_source.child)
@@ -163,7 +163,7 @@ class LiveFrames:
             self.report("restarts", f"the robot's clock went back {self.newest - stamp:.1f} s: "
                         "a new session, started over")  # fmt: skip
             self.tf = TfBuffer()
-            for msg in self._statics:
+            for msg in self._statics.values():
                 self.tf.add_message(msg, static=True)
             self._waiting.clear()
             self._pose_stamps.clear()

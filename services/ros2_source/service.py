@@ -22,16 +22,17 @@ import zenoh
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import MAX_RATE, History, declare_history_publisher
 from wallmap.common.messages import Frame, Pose, pack
-from wallmap.common.ros2_types import deserialize_cdr, ros2_typestore
+from wallmap.common.ros2_types import deserialize_cdr
+from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
 from wallmap.common.runtime import Presence, Stats, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector_rows import ask_rows
+from wallmap.services.mapper.pose_input import TF_TYPE
 from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN
 from wallmap.services.ros2_source.live import LiveFrames
 from wallmap.services.ros2_source.settings import Ros2Settings
 from wallmap.services.ros2_source.topic_watch import TopicWatch
 
-TF_TYPE = "tf2_msgs/msg/TFMessage"
 QUEUE_DEPTH = 512  # samples waiting for the service's thread; beyond, the newest are dropped
 POSE_RATE = 200.0  # poses a second the history is sized for
 
@@ -68,7 +69,7 @@ def _subscriptions(ros2: Ros2Settings) -> dict[str, tuple[str, str]]:
         found["camera_info"] = (ros2.key(ros2.camera_info_topic()), CAMERA_INFO)
     if (pose_topic := ros2.pose_topic()) is not None:
         kind = ros2.pose_spec().kind
-        found["pose"] = (ros2.key(pose_topic), "nav_msgs/msg/Odometry" if kind == "odom" else "")
+        found["pose"] = (ros2.key(pose_topic), ODOMETRY_TYPE if kind == "odom" else "")
     return found
 
 
@@ -93,9 +94,12 @@ def run(
         outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
         presence = Presence(session, keys, "ros2", stats,
                             lambda: {"run": run_id, **watch.report(time.monotonic())})  # fmt: skip
+        worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
+                                                      watch, stop))  # fmt: skip
+        worker.start()  # before the query: the queue it drains may fill meanwhile
         for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):  # the bridge's cache
             if reply.ok is not None:
-                intake.queue.put(_Sample("tf_static", reply.ok.payload.to_bytes()))
+                intake.handler("tf_static")(reply.ok)
         log.info(
             "ready: %s -> %s, %s (poses from %s)",
             ", ".join(key for key, _ in subscriptions.values()),
@@ -103,9 +107,6 @@ def run(
             keys.pose,
             spec,
         )
-        worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
-                                                      watch, stop))  # fmt: skip
-        worker.start()
         stop.wait()
         worker.join()
         log.info("stopping: %s", stats.snapshot())
@@ -133,7 +134,7 @@ def _work(
         watch.heard(sample.kind, time.monotonic())
         key, msgtype = subscriptions[sample.kind]
         try:
-            msg = deserialize_cdr(sample.payload, msgtype or _pose_type(sample.payload))
+            msg = deserialize_cdr(sample.payload, msgtype) if msgtype else _pose(sample.payload)
         except MessageError as err:
             stats.refuse(key, str(err))
             continue
@@ -150,17 +151,18 @@ def _work(
             stats.add("frames")
 
 
-def _pose_type(payload: bytes) -> str:
-    """A ``pose`` topic's type: PoseWithCovarianceStamped if it decodes as one, else PoseStamped.
+def _pose(payload: bytes) -> Any:
+    """A ``pose`` topic's message, of whichever of the two pose types it is.
 
-    The two differ in length by the covariance's 36 doubles, so a PoseStamped's bytes are too
-    short to be read as the other.
+    A PoseWithCovarianceStamped if it decodes as one, else a PoseStamped; MessageError if
+    neither. The two differ in length by the covariance's 36 doubles, so a PoseStamped's bytes
+    are too short to be read as the other.
     """
+    stamped, with_covariance = POSE_TYPES
     try:
-        ros2_typestore().deserialize_cdr(payload, "geometry_msgs/msg/PoseWithCovarianceStamped")
-    except Exception:
-        return "geometry_msgs/msg/PoseStamped"
-    return "geometry_msgs/msg/PoseWithCovarianceStamped"
+        return deserialize_cdr(payload, with_covariance)
+    except MessageError:
+        return deserialize_cdr(payload, stamped)
 
 
 class _Outlet:
