@@ -1,12 +1,21 @@
-"""A test robot: a ROS 2 bag's messages on zenoh-bridge-ros2dds's keys, as a live robot sends them.
+"""A test robot: a ROS 2 bag's messages on Zenoh, as a live robot's bridge or rmw_zenoh sends them.
 
-Each message's own CDR bytes go on the key of its topic (``/T`` -> ``NAMESPACE/T``), in the
-bag's order and at its pace (``SPEED`` times real time); ``tf_static`` is answered to queries,
-as the bridge answers from its cache for a transient-local topic.
+Each message's own CDR bytes go on the key of its topic, in the bag's order and at its pace
+(``SPEED`` times real time):
+- ``bridge`` (zenoh-bridge-ros2dds before 1.6): ``/T`` -> ``NAMESPACE/T``; ``tf_static`` answered
+  to queries on its key, from the bridge's cache of a transient-local topic; each topic's route
+  listed in the bridge's admin space (``@/<id>/ros2/route/topic/pub/<key>``, its JSON).
+- ``bridge-advanced`` (1.6 and later): the same keys, ``tf_static`` in an advanced publisher's
+  cache with publisher detection, as the bridge declares it.
+- ``rmw_zenoh``: ``DOMAIN/NAMESPACE/T/TYPE/HASH`` with rmw_zenoh's attachment (sequence number,
+  source time, publisher id), ``tf_static`` in an advanced publisher's cache, and each
+  publisher's liveliness token under ``@ros2_lv``.
 """
 
 from __future__ import annotations
 
+import json
+import struct
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -14,6 +23,10 @@ from pathlib import Path
 import zenoh
 from conftest import run_wallmap
 from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+from zenoh import ext
+
+from wallmap.services.ros2_source.settings import dds_type_name
 
 SPEED = 2.0  # the robot's pace: twice real time, as the acceptance plays it
 SENSORS = {
@@ -26,22 +39,92 @@ SENSORS = {
 SENSOR_TOPICS = {f"/{spec.split(':')[0]}" for spec in SENSORS.values()}
 
 
-class Robot:
-    """A bag's messages on the bridge's keys, at ``SPEED`` times their recorded pace."""
+DOMAIN = 3  # the rmw_zenoh robot's ROS domain
+HASHES = get_typestore(Stores.ROS2_HUMBLE)
 
-    def __init__(self, session: zenoh.Session, bag: Path, namespace: str) -> None:
-        self.session, self.bag, self.namespace = session, bag, namespace
+
+class Robot:
+    """A bag's messages as ``naming`` puts them on Zenoh, at ``SPEED`` times their recorded pace.
+
+    Announced from the start: the bridge's routes, or rmw_zenoh's liveliness tokens.
+    """
+
+    def __init__(self, session: zenoh.Session, bag: Path, namespace: str, naming: str = "bridge",
+                 renamed: dict[str, str] | None = None) -> None:  # fmt: skip
+        """``renamed``: topics the robot publishes under another name (old -> new)."""
+        self.session, self.bag, self.namespace, self.naming = session, bag, namespace, naming
+        self.renamed = renamed or {}
         self.sent: dict[str, int] = {}
         self._static: bytes | None = None
-        self._cache = session.declare_queryable(self.key("tf_static"), self._answer)
+        self._seq = 0
+        with Reader(bag) as reader:
+            self.types = {c.topic: c.msgtype for c in reader.connections}
+        self._declared: list = []
+        if naming != "rmw_zenoh":  # either bridge: its admin space
+            self._declared.append(session.declare_queryable(
+                f"@/{session.info.zid()}/ros2/route/topic/pub/**", self._routes))  # fmt: skip
+        if naming == "bridge":
+            self._declared.append(session.declare_queryable(self.key("/tf_static"), self._answer))
+        else:
+            self._static_publisher = ext.declare_advanced_publisher(
+                session, self.key("/tf_static"), cache=ext.CacheConfig(max_samples=1),
+                sample_miss_detection=ext.MissDetectionConfig(sporadic_heartbeat=0.5),
+                publisher_detection=True,
+            )  # fmt: skip
+            self._declared.append(self._static_publisher)
+        if naming == "rmw_zenoh":
+            self._declared += [session.liveliness().declare_token(self._token(topic, n))
+                               for n, topic in enumerate(self.types)]  # fmt: skip
 
     def key(self, topic: str) -> str:
-        topic = topic.strip("/")
-        return f"{self.namespace}/{topic}" if self.namespace else topic
+        name = f"{self.namespace}/{self.renamed.get(topic, topic).strip('/')}".strip("/")
+        if self.naming != "rmw_zenoh":
+            return name
+        msgtype = self.types[topic]
+        return f"{DOMAIN}/{name}/{dds_type_name(msgtype)}/{HASHES.hash_rihs01(msgtype)}"
+
+    def _token(self, topic: str, entity: int) -> str:
+        """rmw_zenoh's liveliness token of a publisher (Jazzy's layout)."""
+        name = f"/{self.namespace}/{topic.strip('/')}".replace("//", "/").replace("/", "%")
+        msgtype = self.types[topic]
+        return (f"@ros2_lv/{DOMAIN}/{self.session.info.zid()}/0/{10 + entity}/MP/%/"
+                f"{('%' + self.namespace) if self.namespace else '%'}/robot_node/{name}/"
+                f"{dds_type_name(msgtype)}/{HASHES.hash_rihs01(msgtype)}/::,10:,:,:,,")  # fmt: skip
 
     def _answer(self, query: zenoh.Query) -> None:
         if self._static is not None:  # the bridge's cache of a transient-local topic
             query.reply(query.key_expr, self._static)
+
+    def _routes(self, query: zenoh.Query) -> None:
+        """The bridge's admin space: a route for each of the robot's topics."""
+        for topic, msgtype in self.types.items():
+            key = self.key(topic)
+            route = {"ros2_name": topic, "ros2_type": msgtype, "zenoh_key_expr": key,
+                     "publication_cache_size": 0, "dds_reader": "", "priority": 5,
+                     "remote_routes": [], "local_nodes": ["/robot_node"]}  # fmt: skip
+            reply_key = f"@/{self.session.info.zid()}/ros2/route/topic/pub/{key}"
+            if zenoh.KeyExpr(reply_key).intersects(query.key_expr):
+                query.reply(reply_key, json.dumps(route))
+
+    def send_static_first(self) -> None:
+        """The bag's static transforms now, as a robot sends them long before anyone listens."""
+        with Reader(self.bag) as reader:
+            connections = [c for c in reader.connections if c.topic == "/tf_static"]
+            for connection, _, raw in reader.messages(connections=connections):
+                self._put(connection.topic, bytes(raw))
+
+    def _put(self, topic: str, raw: bytes) -> None:
+        if topic == "/tf_static":
+            self._static = raw
+            if self.naming != "bridge":
+                self._static_publisher.put(raw)
+                return
+        if self.naming == "rmw_zenoh":  # sequence number, source time (ns), publisher id
+            self._seq += 1
+            attachment = struct.pack("<qqB16s", self._seq, time.time_ns(), 16, bytes(16))
+            self.session.put(self.key(topic), raw, attachment=attachment)
+        else:
+            self.session.put(self.key(topic), raw)
 
     def play(self, skip: tuple[str, ...] = (), quiet: tuple[float, float] | None = None) -> None:
         """Every message but those of ``skip`` topics, in bag order, paced.
@@ -57,15 +140,14 @@ class Robot:
                 since = (stamp - start_bag) * 1e-9
                 if quiet and connection.topic in SENSOR_TOPICS and quiet[0] <= since < quiet[1]:
                     continue
-                if connection.topic == "/tf_static":
-                    self._static = bytes(raw)
                 due = start_wall + (stamp - start_bag) * 1e-9 / SPEED
                 time.sleep(max(0.0, due - time.monotonic()))
-                self.session.put(self.key(connection.topic), bytes(raw))
+                self._put(connection.topic, bytes(raw))
                 self.sent[connection.topic] = self.sent.get(connection.topic, 0) + 1
 
     def close(self) -> None:
-        self._cache.undeclare()
+        for declared in self._declared:
+            declared.undeclare()
 
 
 def client(endpoint: str) -> zenoh.Session:
@@ -94,16 +176,24 @@ def mapped(query: Callable[[], dict], sent: int, share: float = 0.95) -> dict:
 
 def play_to_the_source(endpoint: str, prefix_args: tuple[str, ...], bag: Path, namespace: str,
                        log: Path) -> Robot:  # fmt: skip
-    """Once `wallmap ros2` is live on ``endpoint`` (60 s at most; ``log`` says why not), the bag
-    played to it; the robot, with what it sent."""
+    """A robot on the bridge's keys, announcing its topics as soon as the router on ``endpoint``
+    is up; once `wallmap ros2` is live there (60 s at most; ``log`` says why not), the bag
+    played to it. The robot, with what it sent."""
     deadline = time.monotonic() + 60
-    status = ("status", "--json", "--connect", endpoint, *prefix_args)
-    while '"ros2"' not in run_wallmap(*status, expect=None).stdout:
-        assert time.monotonic() < deadline, log.read_text()
-        time.sleep(0.3)
-    with client(endpoint) as session:
+    while True:
+        try:
+            session = client(endpoint)
+            break
+        except zenoh.ZError:
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.3)
+    with session:
         robot = Robot(session, bag, namespace)
         try:
+            status = ("status", "--json", "--connect", endpoint, *prefix_args)
+            while '"ros2"' not in run_wallmap(*status, expect=None).stdout:
+                assert time.monotonic() < deadline, log.read_text()
+                time.sleep(0.3)
             robot.play()
         finally:
             robot.close()

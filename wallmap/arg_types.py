@@ -6,6 +6,8 @@ import argparse
 import math
 from pathlib import Path
 
+from wallmap.services.ros2_source.settings import MAX_DOMAIN
+
 PICTURE_SUFFIXES = (".png", ".svg")  # what ``wallmap.plot.write_picture`` draws
 
 
@@ -104,5 +106,14 @@ def positive_int(value: str) -> int:
     number = int(value)
     if number <= 0:
         msg = f"must be a whole number > 0, got {value}"
+        raise argparse.ArgumentTypeError(msg)
+    return number
+
+
+def domain_id(value: str) -> int:
+    """A ROS domain id: a whole number 0-232."""
+    number = int(value)
+    if not 0 <= number <= MAX_DOMAIN:
+        msg = f"must be a ROS domain id, 0-{MAX_DOMAIN}, got {value}"
         raise argparse.ArgumentTypeError(msg)
     return number

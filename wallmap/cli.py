@@ -122,8 +122,6 @@ def _cmd_mapper(_: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_ros2(_: argparse.Namespace, config: Config) -> int:
-    if config.ros2.sensor is None:
-        raise PlayerError("--sensor TOPIC:TYPE is needed: which of the robot's topics to map")
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     ros2_service.run(zenoh_settings, config.ros2, stop_on_signals(), config.history)
     return 0
@@ -172,11 +170,9 @@ def _cmd_up(args: argparse.Namespace, config: Config) -> int:
     if config.up.ros2:
         if args.bag is not None:
             raise PlayerError(f"--ros2 maps a live robot: give it no BAG ({args.bag})")
-        if config.ros2.sensor is None:
-            raise PlayerError("--ros2 needs --sensor TOPIC:TYPE: the robot's topic to map")
         return up_live(config)
     if args.bag is None:
-        raise PlayerError("a BAG to play is needed (or --ros2 and --sensor for a live robot)")
+        raise PlayerError("a BAG to play is needed (or --ros2 for a live robot)")
     if config.up.odometry and config.player.source.pose_source not in (None, "tf", "none"):
         msg = (
             "--odometry estimates the poses itself; "

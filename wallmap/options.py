@@ -17,6 +17,7 @@ from typing import Any
 
 from wallmap.arg_types import (
     band,
+    domain_id,
     finite,
     intrinsics,
     non_negative,
@@ -177,8 +178,13 @@ ROS2_TOPICS = (
     Option("--namespace", "ros2.namespace", "the bridge's --namespace: topic /T is the key "
            "NAMESPACE/T (empty: none)", metavar="NS"),
     Option("--sensor", "ros2.sensor", "the sensor topic and its type: sensor_msgs/msg/Image "
-           "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan",
-           metavar="TOPIC:TYPE"),
+           "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan (not set: "
+           "the one such topic the bridge or rmw_zenoh announces)", metavar="TOPIC:TYPE"),
+    Option("--rmw-zenoh", "ros2.rmw_zenoh", "read a robot speaking rmw_zenoh in this ROS domain "
+           "(keys DOMAIN/TOPIC/TYPE/HASH), not zenoh-bridge-ros2dds's keys", domain_id,
+           metavar="DOMAIN"),
+    Option("--discover-wait", "ros2.discover_wait", "seconds to wait for the sensor topic to be "
+           "announced (without --sensor)", positive, metavar="S"),
     Option("--camera-info", "ros2.camera_info", "a depth image's CameraInfo topic (not set: "
            "camera_info beside the image)", metavar="TOPIC"),
     Option("--tf-wait", "ros2.tf_wait", "seconds a sensor message waits for its tf, then is "

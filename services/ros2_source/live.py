@@ -8,11 +8,17 @@ with a tf pose source, the robot's pose (fixed <- robot). One that waits longer 
 ``tf_wait`` seconds of the robot's own time (the newest stamp seen on any topic) is dropped and
 counted, so a missing transform never stalls the source. A clock that jumps back (a new session
 of the robot, a bag played again) starts over: buffers, waiting frames, and the camera's info.
+
+Frames are placed as the player places a bag's: the robot's tilt (roll, pitch, height) goes into
+the sensor's mount, and the fixed frame is levelled and the sensor's height band found by a
+survey of the first posed depth frames (``live_survey``), which are held, with the poses that
+come meanwhile, until it is done.
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from wallmap.common.messages import Pose
+from wallmap.common.pose3d import forward_axis
 from wallmap.common.ros_poses import header_stamp, pose_from_matrix, pose_from_message
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.tf_buffer import TfBuffer, TfError, normalize_frame
@@ -32,8 +39,11 @@ from wallmap.services.player.placement import unlevelled
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 from wallmap.services.player.pose_choice import follow_the_sensor
 from wallmap.services.player.pose_sources import PoseSourceSpec
+from wallmap.services.ros2_source.live_survey import LiveSurvey, survey_rows
 
 MAX_WAITING = 64  # sensor messages waiting for their tf at most; the oldest gives way
+RECENT_POSES = 64  # an odom/pose topic's newest poses, whose tilt goes with the frames
+HELD_POSES = 2000  # poses held for the survey at most (10 s at 200 Hz); the oldest give way
 CLOCK_JUMP = 5.0  # s back in the robot's time: a new session, not a late message
 
 
@@ -47,6 +57,9 @@ class _Waiting:
     message: Any
 
 
+Posed = tuple[Pose | None, np.ndarray]  # a frame's 6-DoF robot pose (None: none) and its mount
+
+
 @dataclass
 class LiveFrames:
     """Sensor messages, tf and poses in; frames placed as the player places them out.
@@ -58,8 +71,9 @@ class LiveFrames:
         base_frame: The robot frame the mount is looked up to (the pose source's child).
         tf_wait: Seconds of the robot's time a sensor message waits for its tf.
         rows: The rows the detector asks for (None: whole clouds).
-        report: Told of each message dropped (``no_tf``, ``no_camera_info``, ``overflow``)
-            and of each restart (``restarts``), with a line for the log.
+        report: Told of each message dropped (``no_tf``, ``no_camera_info``, ``overflow``),
+            of each restart (``restarts``), of the survey (``surveyed``) and of a change of the
+            robot frame (``pose_source_changed``), with a line for the log.
     """
 
     sensor_type: str
@@ -77,9 +91,15 @@ class LiveFrames:
         self._pose_stamps: collections.deque[float] = collections.deque(maxlen=500)
         self._placement = unlevelled(self.base_frame)
         self._statics: dict[tuple[str, ...], Any] = {}
+        self._recent: collections.deque[Pose] = collections.deque(maxlen=RECENT_POSES)
+        self._poses_out: list[Pose] = []
+        surveys = self.sensor_type != LASERSCAN and self.pose_source.kind != "none"
+        self._survey: LiveSurvey | None = LiveSurvey() if surveys else None
+        self._held: list[tuple[_Waiting, Pose | None, np.ndarray]] = []
+        self._held_poses: collections.deque[Pose] = collections.deque(maxlen=HELD_POSES)
 
-    def add_tf(self, msg: Any, *, static: bool) -> list[Pose]:
-        """A TFMessage; with a tf pose source, the robot's poses its stamps now cover."""
+    def add_tf(self, msg: Any, *, static: bool) -> None:
+        """A TFMessage; with a tf pose source, the robot's poses its stamps now cover go out."""
         stamps = [header_stamp(t.header, 0) for t in msg.transforms]
         if not static and stamps:
             self._see(max(stamps))
@@ -87,15 +107,32 @@ class LiveFrames:
         if static:  # kept across a restart (a bridge sends them once), the newest of each
             self._statics[tuple(normalize_frame(t.child_frame_id) for t in msg.transforms)] = msg
         if self.pose_source.kind != "tf" or static:
-            return []
+            return
         self._pose_stamps.extend(s for child, s in added if child == self.pose_source.child)
-        return self._tf_poses()
+        self._tf_poses()
 
-    def add_pose(self, msg: Any) -> Pose:
-        """An Odometry or pose message of the robot (an ``odom``/``pose`` source)."""
+    def add_pose(self, msg: Any) -> None:
+        """An Odometry or pose message of the robot (an ``odom``/``pose`` source).
+
+        An Odometry names the robot frame it describes (``child_frame_id``); the sensor's mount
+        is then looked up to that frame, as the player does for a bag's odometry.
+        """
         pose = pose_from_message(msg, 0, self.base_frame)
         self._see(pose.stamp)
-        return self._placement.place(pose, np.eye(4))[0] or pose
+        if pose.child != self.base_frame:
+            self.report("pose_source_changed", f"the robot frame is {pose.child!r} (was "
+                        f"{self.base_frame!r}): the pose messages' child_frame_id")  # fmt: skip
+            self._robot_frame(pose.child)
+        self._recent.append(pose)
+        self._emit(pose)
+
+    def take_poses(self) -> list[Pose]:
+        """The planar poses to send, in order, since the last call.
+
+        They go out before the frames ``ready`` gives, which they place.
+        """
+        out, self._poses_out = self._poses_out, []
+        return out
 
     def add_camera_info(self, msg: Any) -> None:
         """The depth camera's intrinsics (the newest are used)."""
@@ -117,18 +154,52 @@ class LiveFrames:
         """The waiting messages whose tf has come, as frames, in order; the stale dropped."""
         out, still = [], collections.deque()
         for waiting in self._waiting:
-            frame = self._frame(waiting)
-            if frame is None and self.newest - waiting.stamp > self.tf_wait:
-                frame = self._frame(waiting) if self._follow_the_sensor(waiting) else None
-                if frame is None:
+            posed = self._posed(waiting)
+            if posed is None and self.newest - waiting.stamp > self.tf_wait:
+                posed = self._posed(waiting) if self._follow_the_sensor(waiting) else None
+                if posed is None:
                     self.report("no_tf", self._missing(waiting))
                     continue
-            if frame is not None:
-                out.append(frame)
-            else:
+            if posed is None:
                 still.append(waiting)
+            elif self._survey is not None:
+                self._hold(self._survey, waiting, *posed)
+            else:
+                out.append(self._placed(waiting, *posed))
         self._waiting = still
+        if self._survey is not None and self._survey.complete(self.newest):
+            return self._end_survey(self._survey)
         return out
+
+    def _hold(self, survey: LiveSurvey, waiting: _Waiting, pose: Pose | None,
+              mount: np.ndarray) -> None:  # fmt: skip
+        """A frame held for the survey, its points (some rows) surveyed."""
+        read, height = self._reader(waiting.message)
+        survey.add(waiting.stamp, read(survey_rows(height)), pose, mount, waiting.frame_id)
+        self._held.append((waiting, pose, mount))
+
+    def _end_survey(self, survey: LiveSurvey) -> list[SensorFrame]:
+        """The placement the survey finds; the held poses and frames, placed by it."""
+        self._placement, self._survey = survey.placement(self.base_frame), None
+        self.report("surveyed", f"surveyed {len(self._held)} frames: "
+                    f"{self._placement.describe() or 'nothing to level'}")  # fmt: skip
+        for pose in self._held_poses:
+            self._emit(pose)
+        frames = [self._placed(*held) for held in self._held]
+        self._held, self._held_poses = [], collections.deque(maxlen=HELD_POSES)
+        return frames
+
+    def _emit(self, pose: Pose) -> None:
+        """A 6-DoF pose of the robot: held while the survey runs, else out as a planar pose."""
+        if self._survey is not None:
+            self._held_poses.append(pose)
+        else:
+            self._poses_out.append(self._placement.place(pose, np.eye(4))[0] or pose)
+
+    def _robot_frame(self, frame: str) -> None:
+        """The frame the poses describe and the mount is looked up to is now ``frame``."""
+        self.base_frame = frame
+        self._placement = dataclasses.replace(self._placement, forward=forward_axis(frame))
 
     def _follow_the_sensor(self, waiting: _Waiting) -> bool:
         """Whether the plain ``tf`` source, still without ``map -> base_link``, changed.
@@ -141,8 +212,8 @@ class LiveFrames:
         if not warnings:
             return False
         self.report("pose_source_changed", warnings[0])
-        self.pose_source, self.base_frame = spec, spec.child
-        self._placement = unlevelled(spec.child)
+        self.pose_source = spec
+        self._robot_frame(spec.child)
         return True
 
     def _missing(self, waiting: _Waiting) -> str:
@@ -167,22 +238,36 @@ class LiveFrames:
                 self.tf.add_message(msg, static=True)
             self._waiting.clear()
             self._pose_stamps.clear()
+            self._recent.clear()
+            if self._survey is not None:  # what was held is of the old session
+                self._survey, self._held = LiveSurvey(), []
+                self._held_poses.clear()
             self.newest = stamp
         self.newest = max(self.newest, stamp)
 
-    def _frame(self, waiting: _Waiting) -> SensorFrame | None:
-        """The frame of a waiting message, or None while its tf is missing."""
+    def _posed(self, waiting: _Waiting) -> Posed | None:
+        """A waiting message's robot pose and mount, or None while its tf is missing.
+
+        With a tf source, the pose is the chain's at the frame's stamp; with a pose topic, the
+        message nearest in time (never waited for); else none.
+        """
         spec = self.pose_source
         try:
             mount = self.tf.lookup(self.base_frame, waiting.frame_id, waiting.stamp)
-            if spec.kind == "tf":  # the robot's tilt goes with the frame, as the player does it
+            if spec.kind == "tf":
                 matrix = self.tf.lookup(spec.parent, spec.child, waiting.stamp)
-                pose = pose_from_matrix(matrix, waiting.stamp, spec.parent, spec.child)
-                mount = self._placement.place(pose, mount)[1]
+                return pose_from_matrix(matrix, waiting.stamp, spec.parent, spec.child), mount
         except TfError:
             return None
+        if self._recent:
+            return min(self._recent, key=lambda p: abs(p.stamp - waiting.stamp)), mount
+        return None, mount
+
+    def _placed(self, waiting: _Waiting, pose: Pose | None, mount: np.ndarray) -> SensorFrame:
+        """A frame as the player sends it: the robot's tilt in its mount, its band's rows."""
+        mount = self._placement.place(pose, mount)[1]
         read, height = self._reader(waiting.message)
-        points, band = hand_out(read, height, self.rows, mount, None)
+        points, band = hand_out(read, height, self.rows, mount, self._placement.band)
         return SensorFrame(waiting.stamp, waiting.frame_id, invalid_to_nan(np.array(points)),
                            mount, band=band)  # fmt: skip
 
@@ -194,9 +279,9 @@ class LiveFrames:
         info = self.camera_info
         return (lambda rows: depth_image_to_xyz(msg, info, rows)), int(msg.height)
 
-    def _tf_poses(self) -> list[Pose]:
+    def _tf_poses(self) -> None:
         """Poses of the robot at the stamps of its own transform that the tree now covers."""
-        spec, poses, still = self.pose_source, [], collections.deque(maxlen=500)
+        spec, still = self.pose_source, collections.deque(maxlen=500)
         for stamp in self._pose_stamps:
             try:
                 matrix = self.tf.lookup(spec.parent, spec.child, stamp)
@@ -204,7 +289,5 @@ class LiveFrames:
                 if self.newest - stamp <= self.tf_wait:
                     still.append(stamp)
                 continue
-            pose = pose_from_matrix(matrix, stamp, spec.parent, spec.child)
-            poses.append(self._placement.place(pose, np.eye(4))[0] or pose)
+            self._emit(pose_from_matrix(matrix, stamp, spec.parent, spec.child))
         self._pose_stamps = still
-        return poses

@@ -1,8 +1,11 @@
 """The live ROS 2 source: a robot's topics as CDR on Zenoh in, the player's frames and poses out.
 
 zenoh-bridge-ros2dds puts each ROS 2 topic ``/T`` on the key ``T`` (under its ``--namespace``),
-its messages as CDR bytes; ``tf_static`` is transient local, which the bridge answers from its
-cache, so it is asked for at start as well as subscribed to. The samples go from the
+rmw_zenoh on ``DOMAIN/T/TYPE/HASH``, the messages as CDR bytes either way. ``tf_static`` is
+transient local: bridges before 1.6 answer a query on its key from their cache, later bridges
+and rmw_zenoh keep it in an advanced publisher's cache, which an advanced subscriber's history
+reaches; the source does both. Without ``--sensor``, the sensor topic is the one the bridge or
+rmw_zenoh announces (``discovery``). The samples go from the
 subscribers' callbacks into one queue and are decoded, placed (``live.LiveFrames``) and
 published by the service's own thread, on the keys and in the payloads the player uses: the
 detector and the mapper cannot tell a live robot from a bag played in real time.
@@ -14,10 +17,11 @@ import queue
 import threading
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import zenoh
+from zenoh import ext
 
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import MAX_RATE, History, declare_history_publisher
@@ -29,6 +33,7 @@ from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.services.detector_rows import ask_rows
 from wallmap.services.mapper.pose_input import TF_TYPE
 from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN
+from wallmap.services.ros2_source.discovery import discover_sensor
 from wallmap.services.ros2_source.live import LiveFrames
 from wallmap.services.ros2_source.settings import Ros2Settings
 from wallmap.services.ros2_source.topic_watch import TopicWatch
@@ -63,14 +68,22 @@ class _Intake:
 def _subscriptions(ros2: Ros2Settings) -> dict[str, tuple[str, str]]:
     """Sample kind -> (Zenoh key, message type) of everything the source listens to."""
     topic, msgtype = ros2.sensor_topic_type()
-    found = {"sensor": (ros2.key(topic), msgtype), "tf": (ros2.key("tf"), TF_TYPE),
-             "tf_static": (ros2.key("tf_static"), TF_TYPE)}  # fmt: skip
+    found = {"sensor": (topic, msgtype), "tf": ("tf", TF_TYPE), "tf_static": ("tf_static", TF_TYPE)}
     if msgtype == IMAGE:
-        found["camera_info"] = (ros2.key(ros2.camera_info_topic()), CAMERA_INFO)
+        found["camera_info"] = (ros2.camera_info_topic(), CAMERA_INFO)
     if (pose_topic := ros2.pose_topic()) is not None:
         kind = ros2.pose_spec().kind
-        found["pose"] = (ros2.key(pose_topic), ODOMETRY_TYPE if kind == "odom" else "")
-    return found
+        found["pose"] = (pose_topic, ODOMETRY_TYPE if kind == "odom" else "")
+    return {kind: (ros2.key(topic, msgtype or None), msgtype)
+            for kind, (topic, msgtype) in found.items()}  # fmt: skip
+
+
+def _subscribe(session: zenoh.Session, kind: str, key: str, intake: _Intake) -> Any:
+    """A subscriber; ``tf_static``'s with the history of advanced publishers' caches."""
+    if kind != "tf_static":
+        return session.declare_subscriber(key, intake.handler(kind))
+    history = ext.HistoryConfig(detect_late_publishers=True)
+    return ext.declare_advanced_subscriber(session, key, intake.handler(kind), history=history)
 
 
 def run(
@@ -79,17 +92,20 @@ def run(
     """Until ``stop`` is set; returns the counters. PlayerError says what is wrong with a flag."""
     log = setup_logging("ros2")
     keys, stats, run_id = Keys(settings.prefix), Stats(log), uuid.uuid4().hex[:12]
-    subscriptions = _subscriptions(ros2)
-    _, msgtype = ros2.sensor_topic_type()
     spec = ros2.pose_spec()
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
+        if ros2.sensor is None:
+            ros2 = replace(ros2, sensor=discover_sensor(session, ros2, stop))
+            log.info("the sensor topic, as announced: %s", ros2.sensor)
+        subscriptions = _subscriptions(ros2)
+        _, msgtype = ros2.sensor_topic_type()
         rows = None if ros2.whole_clouds or msgtype == LASERSCAN else ask_rows(session, keys)
         live = LiveFrames(msgtype, spec, spec.child, ros2.tf_wait, rows,
                           lambda counter, line: stats.note(counter, counter, line))  # fmt: skip
         intake = _Intake(stats)
         watch = TopicWatch({kind: key for kind, (key, _) in subscriptions.items()})
-        subscribers = [session.declare_subscriber(key, intake.handler(kind))
+        subscribers = [_subscribe(session, kind, key, intake)
                        for kind, (key, _) in subscriptions.items()]  # fmt: skip
         outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
         presence = Presence(session, keys, "ros2", stats,
@@ -97,7 +113,8 @@ def run(
         worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
                                                       watch, stop))  # fmt: skip
         worker.start()  # before the query: the queue it drains may fill meanwhile
-        for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):  # the bridge's cache
+        # an old bridge's cache (later ones and rmw_zenoh's: the advanced subscriber's history)
+        for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):
             if reply.ok is not None:
                 intake.handler("tf_static")(reply.ok)
         log.info(
@@ -139,14 +156,16 @@ def _work(
             stats.refuse(key, str(err))
             continue
         if sample.kind in ("tf", "tf_static"):
-            outlet.poses(live.add_tf(msg, static=sample.kind == "tf_static"))
+            live.add_tf(msg, static=sample.kind == "tf_static")
         elif sample.kind == "camera_info":
             live.add_camera_info(msg)
         elif sample.kind == "pose":
-            outlet.poses([live.add_pose(msg)])
+            live.add_pose(msg)
         else:
             live.add_sensor(msg)
-        for frame in live.ready():
+        frames = live.ready()
+        outlet.poses(live.take_poses())  # before the frames they place
+        for frame in frames:
             outlet.frame(frame)
             stats.add("frames")
 

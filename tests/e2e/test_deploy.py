@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import ROOT, free_port, run_wallmap, wait_for_port
-from live_robot import SENSORS, mapped, play_to_the_source
+from live_robot import mapped, play_to_the_source
 
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import load_truth, write_scene_bag
@@ -223,11 +223,12 @@ def test_compose_odometry_profile_maps_a_bag_without_poses(tmp_path):
 
 def test_compose_live_profile_maps_a_live_robot(tmp_path):
     """`docker-compose --profile live up router mapper detector ros2`, as documented, on a robot
-    that sends a laser scan under the namespace robot1 (tests/live_robot.py)."""
+    that sends a laser scan under the namespace robot1 (tests/live_robot.py), its sensor topic
+    found from what its bridge announces."""
     info = write_scene_bag(
         tmp_path / "live", seed=21, n_frames=120, fmt="ros2-mcap", sensor="laserscan"
     )
-    env = {"WALLMAP_NAMESPACE": "robot1", "WALLMAP_SENSOR": SENSORS["laserscan"]}
+    env = {"WALLMAP_NAMESPACE": "robot1"}  # the sensor: the one topic the bridge announces
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     commands = {k: localise(v, endpoint, tmp_path, env) for k, v in compose_commands().items()}

@@ -19,8 +19,10 @@ from pathlib import Path
 
 import pytest
 from conftest import Stack, assert_clean_exit, free_port
-from live_robot import SENSORS, Robot, client, mapped, play_to_the_source
+from live_robot import DOMAIN, SENSORS, Robot, client, mapped, play_to_the_source
 
+from wallmap.common.messages import unpack_frame
+from wallmap.common.transport import Keys
 from wallmap.evaluation import evaluate_map
 
 
@@ -35,29 +37,45 @@ def _wait_for(stack: Stack, service: str, timeout: float = 30.0) -> None:
 
 
 @pytest.mark.parametrize(
-    ("sensor", "namespace"), [("depth16", "robot1"), ("pointcloud", ""), ("laserscan", "robot1")]
+    ("sensor", "namespace", "naming", "discovered"),
+    [
+        ("depth16", "robot1", "bridge", False),
+        ("pointcloud", "", "bridge-advanced", True),
+        ("laserscan", "robot1", "rmw_zenoh", True),
+    ],
 )
 def test_a_live_robot_is_mapped_from_its_topics(
-    stack: Stack, scene_bags, sensor: str, namespace: str
+    stack: Stack, scene_bags, sensor: str, namespace: str, naming: str, discovered: bool
 ) -> None:
+    """Each sensor type, each naming; the sensor topic given, or found from what is announced.
+
+    The static transforms are sent before the source starts, as a robot sends them long before
+    anyone listens: from the bridge's cache by a query, or from an advanced publisher's cache.
+    """
     info = scene_bags(f"live-{sensor}", seed=21, n_frames=120, fmt="ros2-mcap", sensor=sensor)
     stack.start("mapper", "mapper", *stack.zenoh_args)
     stack.start("detector", "detector", *stack.zenoh_args)
     _wait_for(stack, "detector")
-    source = stack.start("ros2", "ros2", "--namespace", namespace, "--sensor", SENSORS[sensor],
-                         *stack.zenoh_args)  # fmt: skip
-    _wait_for(stack, "ros2")
+    args = ["--namespace", namespace]
+    args += ["--rmw-zenoh", str(DOMAIN)] if naming == "rmw_zenoh" else []
+    args += [] if discovered else ["--sensor", SENSORS[sensor]]
     with client(stack.endpoint) as session:
-        robot = Robot(session, info.path, namespace)
+        robot = Robot(session, info.path, namespace, naming)
         try:
-            robot.play()
+            robot.send_static_first()
+            source = stack.start("ros2", "ros2", *args, *stack.zenoh_args)
+            _wait_for(stack, "ros2")
+            robot.play(skip=("/tf_static",))
         finally:
             robot.close()
+    sensor_topic = SENSORS[sensor].split(":")[0]
+    if discovered:
+        assert f"the sensor topic, as announced: {SENSORS[sensor]}" in source.output()
     heard = _status_of(stack, "ros2")
-    sensor_key = f"{namespace}/{SENSORS[sensor].split(':')[0]}".strip("/")
+    sensor_key = next(key for key in heard["topics"] if sensor_topic in key)
     assert heard["topics"][sensor_key]["messages"] >= 0.95 * 120, heard  # big clouds may drop
     assert not [m for m in heard["missing"] if "nothing heard" in m], heard
-    sent = robot.sent["/scan" if sensor == "laserscan" else f"/{SENSORS[sensor].split(':')[0]}"]
+    sent = robot.sent[f"/{sensor_topic}"]
     reply = mapped(lambda: stack.query("--min-obs", "3"), sent)
     score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
     print(score.summary())
@@ -157,3 +175,45 @@ def test_up_maps_a_live_robot_until_stopped(tmp_path: Path, scene_bags) -> None:
     assert score.precision >= 0.98
     assert score.recall >= 0.95
     assert score.duplicates == 0
+
+
+def test_without_sensor_and_nothing_announced_the_source_says_so_and_exits(stack: Stack) -> None:
+    out = stack.run("ros2", "--namespace", "robot9", "--discover-wait", "1", *stack.zenoh_args,
+                    expect=None)  # fmt: skip
+    assert out.returncode == 1, out.stderr
+    assert "Traceback" not in out.stderr
+    assert out.stderr.strip().splitlines()[-1] == (
+        "wallmap ros2: error: no sensor topic announced by the bridge under 'robot9' within 1 s "
+        "(seen: no topic at all); give --sensor TOPIC:TYPE"
+    )
+
+
+def test_camera_info_elsewhere_and_whole_clouds(stack: Stack, scene_bags) -> None:
+    """``--camera-info`` finds a CameraInfo not beside its image; ``--whole-clouds`` sends every
+    row of each image, not the band's rows the detector asks for."""
+    info = scene_bags("live-depth16", seed=21, n_frames=120, fmt="ros2-mcap", sensor="depth16")
+    camera = json.loads(info.truth_path.read_text())["camera"]
+    stack.start("detector", "detector", *stack.zenoh_args)
+    _wait_for(stack, "detector")
+    shapes: list[tuple[int, ...]] = []
+    renamed = {"/camera/depth/camera_info": "/calibration/depth"}
+    with client(stack.endpoint) as session:
+        frames = session.declare_subscriber(
+            Keys(stack.prefix).frames,
+            lambda s: shapes.append(unpack_frame(s.payload.to_bytes()).points.shape),
+        )
+        robot = Robot(session, info.path, "", renamed=renamed)
+        try:
+            stack.start("ros2", "ros2", "--sensor", SENSORS["depth16"], "--camera-info",
+                        "/calibration/depth", "--whole-clouds", *stack.zenoh_args)  # fmt: skip
+            _wait_for(stack, "ros2")
+            robot.play()
+        finally:
+            robot.close()
+        time.sleep(1.0)
+        frames.undeclare()
+    counters = _status_of(stack, "ros2")["counters"]
+    assert counters.get("no_camera_info", 0) <= 1, counters  # an image before the first info
+    assert counters["frames"] >= 0.95 * robot.sent["/camera/depth/image_raw"], counters
+    assert len(shapes) == counters["frames"]
+    assert set(shapes) == {(camera["height"], camera["width"], 3)}, set(shapes)

@@ -51,9 +51,9 @@ def test_a_scan_waits_for_its_tf_then_comes_out_mounted_and_its_pose_with_it() -
     live.add_tf(_tf(0.0, "base_link", "laser", x=0.2), static=True)
     live.add_sensor(_scan(1.0))
     assert live.ready() == []  # no map -> base_link yet: it waits
-    poses = live.add_tf(_tf(0.9, "map", "base_link", x=1.0), static=False)
-    poses += live.add_tf(_tf(1.1, "map", "base_link", x=1.2, yaw=0.1), static=False)
-    frames = live.ready()
+    live.add_tf(_tf(0.9, "map", "base_link", x=1.0), static=False)
+    live.add_tf(_tf(1.1, "map", "base_link", x=1.2, yaw=0.1), static=False)
+    frames, poses = live.ready(), live.take_poses()
     assert [f.stamp for f in frames] == [1.0]
     np.testing.assert_allclose(frames[0].T_base_sensor[:3, 3], [0.2, 0.0, 0.0], atol=1e-12)
     assert frames[0].points.shape == (1, 90, 3)
@@ -109,9 +109,10 @@ def test_without_a_map_frame_the_poses_are_taken_in_odom_after_the_wait() -> Non
     live.add_tf(_tf(0.0, "base_link", "laser"), static=True)
     poses, frames = [], []
     for k in range(11):  # a robot without a localiser: odom -> base_link only
-        poses += live.add_tf(_tf(1.0 + 0.1 * k, "odom", "base_link", x=0.1 * k), static=False)
+        live.add_tf(_tf(1.0 + 0.1 * k, "odom", "base_link", x=0.1 * k), static=False)
         live.add_sensor(_scan(1.0 + 0.1 * k))
         frames += live.ready()
+        poses += live.take_poses()
         if k < 5:  # map -> base_link is what the source waits for, for tf_wait...
             assert (frames, poses) == ([], [])
     # ...then it takes the poses in odom, says so once, and loses no frame.
@@ -119,3 +120,33 @@ def test_without_a_map_frame_the_poses_are_taken_in_odom_after_the_wait() -> Non
     assert "tf:odom>base_link" in reported[0][1]
     assert [round(f.stamp, 1) for f in frames] == [round(1.0 + 0.1 * k, 1) for k in range(11)]
     assert {p.frame for p in poses} == {"odom"}
+
+
+def _odometry(stamp: float, child: str, pitch: float):
+    half = pitch / 2
+    q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=math.sin(half), z=0.0, w=math.cos(half))
+    point = T["geometry_msgs/msg/Point"](x=1.0, y=0.0, z=0.0)
+    pose = T["geometry_msgs/msg/PoseWithCovariance"](
+        pose=T["geometry_msgs/msg/Pose"](position=point, orientation=q), covariance=np.zeros(36)
+    )
+    still = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=still, angular=still), covariance=np.zeros(36)
+    )
+    return T["nav_msgs/msg/Odometry"](header=_header(stamp, "odom"), child_frame_id=child,
+                                      pose=pose, twist=twist)  # fmt: skip
+
+
+def test_an_odometry_topic_names_the_robot_frame_and_its_tilt_goes_into_the_mount() -> None:
+    live, reported = _live("odom")
+    live.add_tf(_tf(0.0, "base_footprint", "laser", x=0.2), static=True)
+    live.add_pose(_odometry(1.0, "base_footprint", pitch=0.1))
+    (pose,) = live.take_poses()
+    assert (pose.child, round(pose.x, 9), pose.pitch) == ("base_footprint", 1.0, 0.0)
+    assert [counter for counter, _ in reported] == ["pose_source_changed"]
+    live.add_pose(_odometry(2.0, "base_footprint", pitch=0.3))
+    live.add_sensor(_scan(1.1))  # nearest pose in time: the one at 1.0 s, pitched 0.1 rad
+    (frame,) = live.ready()
+    mount = frame.T_base_sensor
+    assert math.atan2(-mount[2, 0], mount[0, 0]) == pytest.approx(0.1)
+    np.testing.assert_allclose(mount[:3, 3], [0.2 * math.cos(0.1), 0.0, -0.2 * math.sin(0.1)])
