@@ -13,6 +13,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 SCRIPTS = [
     ("detector per frame on 640-point rows, against scikit-learn", ["detector_speed.py"]),
+    ("where a 320x240 depth frame's detector time goes, stage by stage", ["detector_stages.py"]),
     ("association + EKF update per observation", ["mapper_scaling.py"]),
     ("map/walls query latency, 10 concurrent clients", ["query_latency.py"]),
     ("end to end, 30 Hz 640x480 PointCloud2, against the read floor", ["end_to_end.py"]),
