@@ -94,9 +94,17 @@ def key_expression(value: str, flag: str) -> str:
 
 
 def make_config(
-    settings: ZenohSettings, *, mode: str = "client", listen: tuple[str, ...] = ()
+    settings: ZenohSettings,
+    *,
+    mode: str = "client",
+    listen: tuple[str, ...] = (),
+    join: tuple[str, ...] = (),
 ) -> zenoh.Config:
-    """Build the Zenoh config: file first, then what the flags say."""
+    """Build the Zenoh config: file first, then what the flags say.
+
+    A router listens on ``listen`` and joins the routers at ``join`` (a mesh: a router reaches
+    another only through its own ``connect/endpoints``); it never connects to itself.
+    """
     if settings.config_file is not None:
         if not settings.config_file.is_file():
             msg = f"zenoh config {settings.config_file} does not exist"
@@ -119,6 +127,11 @@ def make_config(
     conf.insert_json5("mode", json.dumps(mode))
     if mode == "router":
         _insert_endpoints(conf, "listen", listen)
+        if itself := sorted(set(join) & set(listen)):
+            msg = f"a router cannot join itself: --connect {itself[0]} is one of its --listen"
+            raise TransportError(msg)
+        if join:
+            _insert_endpoints(conf, "connect", join)
     else:
         _insert_endpoints(conf, "connect", settings.connect)
         if settings.wait_for_router:
@@ -134,16 +147,19 @@ def open_session(
     *,
     mode: str = "client",
     listen: tuple[str, ...] = (),
+    join: tuple[str, ...] = (),
     count: Callable[[str], None] | None = None,
     stop: threading.Event | None = None,
 ) -> Iterator[zenoh.Session]:
     """A session for the ``with`` block, Zenoh's errors turned into one readable line.
 
+    A router listens on ``listen`` and joins the routers at ``join`` (``make_config``).
+
     A client's link to its router is watched (see ``RouterWatch``); ``count`` is told of each
     loss and recovery (``router_lost``, ``router_back``), for the service's counters. ``stop``
     (set by SIGINT or SIGTERM) ends a wait for the router with ``StoppedWaiting``.
     """
-    conf = make_config(settings, mode=mode, listen=listen)
+    conf = make_config(settings, mode=mode, listen=listen, join=join)
     where = ", ".join(listen if mode == "router" else settings.connect)
     try:
         session = zenoh.open(conf) if stop is None else _open_unless_stopped(conf, stop, where)

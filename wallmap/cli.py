@@ -50,6 +50,8 @@ from wallmap.options import (
     POSES,
     ROS2,
     ROS2_TOPICS,
+    ROUTER_JOIN,
+    ROUTER_ZENOH,
     SLAM,
     SOURCE,
     SPEED,
@@ -94,8 +96,10 @@ def _cmd_router(args: argparse.Namespace, config: Config) -> int:
     log = setup_logging("router")
     stop = stop_on_signals()
     listen = tuple(args.listen or [DEFAULT_CONNECT])
-    with open_session(config.zenoh, mode="router", listen=listen):
-        log.info("listening on %s", ", ".join(listen))
+    join = tuple(getattr(args, ROUTER_JOIN.dest) or ())  # the flag only: WALLMAP_CONNECT is
+    with open_session(config.zenoh, mode="router", listen=listen, join=join):  # for services
+        log.info("listening on %s%s", ", ".join(listen),
+                 f"; joining the routers at {', '.join(join)}" if join else "")  # fmt: skip
         stop.wait()
     return 0
 
@@ -283,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"wallmap {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = add_command(sub, "router", "a Zenoh router", _cmd_router, ZENOH)
+    p = add_command(sub, "router", "a Zenoh router", _cmd_router, ROUTER_ZENOH)
     p.add_argument(
         "--listen", action="append", metavar="ENDPOINT", help=f"default {DEFAULT_CONNECT}"
     )

@@ -50,6 +50,8 @@ class Option:
         repeat: The flag may be given several times; the key gets the list.
         negatable: ``--x`` sets true, ``--no-x`` false.
         exclusive: Options naming the same group here may not be given together.
+        show_default: Whether ``--help`` shows the key's default (not when the flag means
+            something else there, as the router's ``--connect``).
     """
 
     flag: str
@@ -62,6 +64,7 @@ class Option:
     repeat: bool = False
     negatable: bool = False
     exclusive: str | None = None
+    show_default: bool = True
 
     @property
     def dest(self) -> str:
@@ -70,7 +73,9 @@ class Option:
 
     def add_to(self, parser: argparse.ArgumentParser | Any, defaults: Config) -> None:
         """Add the flag to ``parser``; ``--help`` shows the default from ``defaults``."""
-        text = self.help + _default_text(_lookup(defaults, self.key), self)
+        text = self.help
+        if self.show_default:
+            text += _default_text(_lookup(defaults, self.key), self)
         common: dict[str, Any] = {"dest": self.dest, "default": None, "help": text}
         if self.const is not None:
             parser.add_argument(self.flag, action="store_const", const=self.const, **common)
@@ -138,6 +143,11 @@ ZENOH = (
     Option("--zenoh-config", "zenoh.config_file", "Zenoh json5 config applied first", Path,
            metavar="FILE"),
 )  # fmt: skip
+
+ROUTER_JOIN = Option("--connect", "zenoh.connect", "another router to join, repeatable: a "
+                     "mesh, each robot's router joined to the map's (default: none)",
+                     metavar="ENDPOINT", repeat=True, show_default=False)  # fmt: skip
+ROUTER_ZENOH = (ROUTER_JOIN, *ZENOH[1:])
 
 HISTORY = (
     Option("--history", "history.seconds", "seconds of the live streams kept for a service that "
