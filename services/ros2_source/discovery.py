@@ -105,10 +105,9 @@ def discover_sensor(session: zenoh.Session, ros2: Ros2Settings, stop: threading.
         PlayerError: No sensor topic announced in time (nor any topic: the bridge not
             reached, or the namespace wrong), or several.
     """
-    deadline = time.monotonic() + ros2.discover_wait
+    deadline, where = time.monotonic() + ros2.discover_wait, _where(ros2)
     while True:
         announced = _announced(session, ros2)
-        where = _where(ros2)
         if (sensor := choose_sensor(announced, where)) is not None:
             return sensor
         if time.monotonic() >= deadline or stop.wait(RETRY):

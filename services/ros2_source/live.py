@@ -95,7 +95,7 @@ class LiveFrames:
         self._poses_out: list[Pose] = []
         surveys = self.sensor_type != LASERSCAN and self.pose_source.kind != "none"
         self._survey: LiveSurvey | None = LiveSurvey() if surveys else None
-        self._held: list[tuple[_Waiting, Pose | None, np.ndarray]] = []
+        self._held: list[tuple[_Waiting, *Posed]] = []
         self._held_poses: collections.deque[Pose] = collections.deque(maxlen=HELD_POSES)
 
     def add_tf(self, msg: Any, *, static: bool) -> None:
@@ -186,7 +186,8 @@ class LiveFrames:
         for pose in self._held_poses:
             self._emit(pose)
         frames = [self._placed(*held) for held in self._held]
-        self._held, self._held_poses = [], collections.deque(maxlen=HELD_POSES)
+        self._held.clear()
+        self._held_poses.clear()
         return frames
 
     def _emit(self, pose: Pose) -> None:
@@ -240,7 +241,8 @@ class LiveFrames:
             self._pose_stamps.clear()
             self._recent.clear()
             if self._survey is not None:  # what was held is of the old session
-                self._survey, self._held = LiveSurvey(), []
+                self._survey = LiveSurvey()
+                self._held.clear()
                 self._held_poses.clear()
             self.newest = stamp
         self.newest = max(self.newest, stamp)
