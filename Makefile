@@ -10,6 +10,8 @@ $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "wallmap needs Python 3.11 or newer (set PYTHON=...)")'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	@# The detector's compiled loops: compiled once here (about 10 s), cached by numba.
+	$(BIN)/python -c 'from wallmap.services.detector.detector import compile_kernels as c; c()'
 	@touch $(STAMP)
 
 demo: $(STAMP)

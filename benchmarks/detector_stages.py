@@ -16,7 +16,6 @@ import argparse
 import statistics
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +57,7 @@ def main() -> None:
         free_rays(stack, mount)
         marks.append(time.perf_counter())
         base = detector.config.ransac
-        params = replace(base, noise_scale=base.noise_scale * detector.noise["depth"].scale)
+        params = base.scaled(detector.noise["depth"].scale)
         detect_lines(scan, params, np.random.default_rng((detector.config.seed, frame.seq)))
         marks.append(time.perf_counter())
         for name, start, end in zip(stages, [clock, *marks[:-1]], marks, strict=True):

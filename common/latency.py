@@ -112,21 +112,29 @@ class LatencyEstimator:
             maxlen=window
         )
         self._last: tuple[float, Array] | None = None
+        self.added = 0  # turns ever added: the kept ones stop growing in number once full
 
-    def add(self, stamp: float, closest: Array) -> None:
-        """A frame's stamp and its lines' closest points (n, 2), in the robot frame."""
+    def add(self, stamp: float, closest: Array) -> bool:
+        """A frame's stamp and its lines' closest points (n, 2), in the robot frame.
+
+        True when they gave a turn (the lines matched the last frame's).
+        """
+        added = False
         if self._last is not None and 0.0 < stamp - self._last[0] < 0.5:
             turn = line_turn(self._last[1], closest)
             if turn is not None:
                 self._turns.append((self._last[0], stamp, turn))
+                self.added += 1
+                added = True
         elif self._last is not None and stamp < self._last[0]:
             self._turns.clear()  # time went back: another run
         self._last = (stamp, closest)
+        return added
 
     def to_json(self) -> dict[str, Any]:
         """The turns kept and the last frame's lines (a state file's)."""
         last = None if self._last is None else [self._last[0], self._last[1].tolist()]
-        return {"turns": [list(t) for t in self._turns], "last": last}
+        return {"turns": [list(t) for t in self._turns], "last": last, "added": self.added}
 
     def restore(self, data: dict[str, Any]) -> None:
         """Go on exactly where ``to_json`` left off; ValueError says what is wrong."""
@@ -138,6 +146,7 @@ class LatencyEstimator:
         self._turns.clear()
         self._turns.extend((a, b, c) for a, b, c in turns.tolist())
         self._last = None if closest is None else (float(last[0]), closest)
+        self.added = int(data.get("added", len(self._turns)))  # older state files: as kept
 
     def __len__(self) -> int:
         return len(self._turns)

@@ -9,8 +9,10 @@ the two independent. Both are mapped to (u, v) by the Jacobian of ``(u, v) = (n 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,7 +53,19 @@ class LineFit:
     @property
     def length(self) -> float:
         """Length of the fitted segment."""
-        return float(np.linalg.norm(self.p1 - self.p0))
+        return math.hypot(self.p1[0] - self.p0[0], self.p1[1] - self.p0[1])
+
+
+@functools.cache  # an import statement costs microseconds even when done: once per process
+def kernels() -> ModuleType:
+    """The line search's compiled loops (``line_kernels``), imported when first used.
+
+    Importing numba takes 0.2 s, which every wallmap command would pay: the configuration,
+    which they all read, imports this module.
+    """
+    from wallmap.common import line_kernels  # noqa: PLC0415 - see the docstring
+
+    return line_kernels
 
 
 def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1.0) -> LineFit:
@@ -66,17 +80,17 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
             camera's errors are), which the independent-points formula underestimates.
     """
     n = len(points)
+    points = np.ascontiguousarray(points, dtype=np.float64)
     weights = np.ones(n) if sigmas is None else 1.0 / (sigmas * sigmas)
-    normal, offset, centroid, centred, total = _weighted_line(points, weights)
-    nx, ny = normal
-    # Positions along the line and residuals across it, in one product (this runs per line).
-    t, residuals = (centred @ np.array([[-ny, nx], [nx, ny]])).T
-    chi2_per_dof = float(weights @ (residuals * residuals)) / max(n - 2, 1)
+    nx, ny, offset, cx, cy, total = kernels().weighted_line(points, weights)
+    # Positions t along the line and residuals r across it, summed in one pass.
+    wtt, wrr, rr, t_min, t_max = kernels().line_spread(points, weights, nx, ny, cx, cy)
+    chi2_per_dof = wrr / max(n - 2, 1)
     scale2 = chi2_per_dof if sigmas is None else max(chi2_per_dof, 1.0)
-    var_angle = scale2 / max(float(weights @ (t * t)), 1e-12)
+    var_angle = scale2 / max(wtt, 1e-12)
     var_offset = scale2 / total
     # Rotating the normal by d_angle about the centroid moves (u, v) along `jac_angle`.
-    c_along = float(centroid[1] * nx - centroid[0] * ny)
+    c_along = cy * nx - cx * ny
     jx, jy = nx * c_along - offset * ny, ny * c_along + offset * nx
     cov = np.array(
         [
@@ -90,6 +104,8 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
             ],
         ]
     )
+    normal = np.array([nx, ny])
+    centroid = np.array([cx, cy])
     along = np.array([-ny, nx])
     return LineFit(
         normal=normal,
@@ -97,44 +113,13 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
         centroid=centroid,
         closest=offset * normal,
         cov=cov_scale * cov,
-        p0=centroid + float(t.min()) * along,
-        p1=centroid + float(t.max()) * along,
+        p0=centroid + t_min * along,
+        p1=centroid + t_max * along,
         n_points=n,
-        rms=math.sqrt(float(residuals @ residuals) / n),
+        rms=math.sqrt(rr / n),
         angle_sd=math.sqrt(cov_scale * var_angle),
         noise_ratio=math.nan if sigmas is None else math.sqrt(chi2_per_dof),
     )
-
-
-def line_through(points: Array, sigmas: Array) -> tuple[Array, float]:
-    """The weighted TLS line's unit normal and offset alone, for when no more is needed."""
-    normal, offset, *_ = _weighted_line(points, 1.0 / (sigmas * sigmas))
-    return normal, offset
-
-
-def _weighted_line(points: Array, weights: Array) -> tuple[Array, float, Array, Array, float]:
-    """Normal (away from the origin), offset, centroid, centred points and total weight."""
-    total = float(weights.sum())
-    centroid = weights @ points / total
-    centred = points - centroid
-    (sxx, sxy), (_, syy) = (centred * weights[:, None]).T @ centred
-    # The scatter's major axis runs along the line; the normal is across it (closed form, 2x2).
-    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
-    normal = np.array([-math.sin(angle), math.cos(angle)])
-    offset = float(normal @ centroid)
-    if offset < 0.0:
-        normal, offset = -normal, -offset
-    return normal, offset, centroid, centred, total
-
-
-def _smallest_scatter_eigenvalue(
-    w: Array, sx: Array, sy: Array, sxx: Array, sxy: Array, syy: Array
-) -> Array:
-    """Weighted sum of squared TLS residuals from running sums (closed form for 2x2)."""
-    a = sxx - sx * sx / w
-    b = sxy - sx * sy / w
-    c = syy - sy * sy / w
-    return 0.5 * (a + c) - np.sqrt(0.25 * (a - c) ** 2 + b * b)
 
 
 def bend_split(points: Array, sigmas: Array, min_points: int, f_threshold: float) -> int | None:
@@ -142,23 +127,13 @@ def bend_split(points: Array, sigmas: Array, min_points: int, f_threshold: float
 
     Walls meet at any angle, also at a slight kink, and a line fitted across a kink is off in
     angle. An F-test compares one line with the best two (3 more parameters: a second line and the
-    cut); every cut is scored at once from running sums.
+    cut); every cut is scored at once from running sums of the weighted scatter, whose smallest
+    eigenvalue (closed form for 2x2) is the weighted sum of squared TLS residuals.
 
     Returns:
         the size of the first part, or None to keep one line.
     """
-    n = len(points)
-    if n < 2 * min_points:
-        return None
-    w = 1.0 / (sigmas * sigmas)
-    x, y = (points - points[n // 2]).T  # centred on a middle point, for precise sums
-    wx, wy = w * x, w * y
-    sums = np.cumsum(np.vstack((w, wx, wy, wx * x, wx * y, wy * y)), axis=1)
-    head = sums[:, min_points - 1 : n - min_points]
-    tail = sums[:, -1:] - head
-    two = _smallest_scatter_eigenvalue(*head) + _smallest_scatter_eigenvalue(*tail)
-    one = float(_smallest_scatter_eigenvalue(*sums[:, -1]))
-    best = int(np.argmin(two))
-    residual = max(float(two[best]), 1e-12)
-    f = ((one - residual) / 3.0) / (residual / (n - 5))
-    return min_points + best if f > f_threshold else None
+    cut = kernels().bend_cut(
+        np.ascontiguousarray(points, dtype=np.float64), sigmas, min_points, f_threshold
+    )
+    return None if cut < 0 else cut

@@ -10,6 +10,7 @@ or an occluder.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 from collections import Counter
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.config_file import require
-from wallmap.common.line_fit import LineFit, bend_split, fit_line, line_through
+from wallmap.common.line_fit import LineFit, bend_split, fit_line, kernels
 
 Array = NDArray[np.float64]
 SCORED_POINTS = 256  # hypotheses are scored on about this many points of a cluster
@@ -116,6 +117,15 @@ class RansacParams:
     nan_run: int = 0
     max_jump: float = math.inf
 
+    def scaled(self, factor: float) -> RansacParams:
+        """These, with the per-point noise scaled by ``factor`` (> 0): the noise learnt.
+
+        Made for every frame, so not checked again: a positive factor keeps them valid.
+        """
+        out = copy.copy(self)
+        object.__setattr__(out, "noise_scale", self.noise_scale * factor)
+        return out
+
     def __post_init__(self) -> None:
         for name, rule, ok in _RULES:
             require(ok(getattr(self, name)), name, rule, getattr(self, name))
@@ -132,12 +142,10 @@ def split_at_nans(
     wall (a quarter of them on a cheap one), so for it runs of up to ``nan_run`` invalid points
     do not split, and a jump of more than ``max_jump`` (m) between neighbours does.
     """
-    index = np.flatnonzero(np.isfinite(points).all(axis=1))
-    if not len(index):
-        return []
-    skipped = np.diff(index) - 1
-    jumps = np.hypot(*np.diff(points[index], axis=0).T)
-    return np.split(index, np.flatnonzero((skipped > nan_run) | (jumps > max_jump)) + 1)
+    index, starts = kernels().cluster_bounds(
+        np.ascontiguousarray(points, dtype=np.float64), nan_run, max_jump
+    )
+    return [index[a:b] for a, b in itertools.pairwise(starts.tolist())]
 
 
 def point_sigmas(points: Array, params: RansacParams) -> Array:
@@ -146,45 +154,32 @@ def point_sigmas(points: Array, params: RansacParams) -> Array:
     return params.noise_scale * np.maximum(params.sigma_floor, params.noise_k * range2)
 
 
-def _best_hypothesis(
-    points: Array, band: Array, rng: np.random.Generator, iterations: int
-) -> Array:
-    """Inlier mask of the best of ``iterations`` two-point line hypotheses."""
+def _inliers(
+    points: Array, sigmas: Array, band: Array, rng: np.random.Generator, iterations: int,
+    min_points: int,
+) -> NDArray[np.intp]:  # fmt: skip
+    """Inliers of the best of ``iterations`` two-point hypotheses, refitted once; may be empty.
+
+    Hypotheses are scored on evenly spaced points when there are many (neighbours on a dense
+    row say the same): about ``SCORED_POINTS`` of them.
+    """
     n = len(points)
     first = rng.integers(0, n, iterations)
     second = (first + rng.integers(1, n, iterations)) % n  # never the same point
-    start = points[first]
-    direction = points[second] - start
-    normals = np.column_stack([-direction[:, 1], direction[:, 0]])
-    normals /= np.hypot(direction[:, 0], direction[:, 1])[:, None]
-    offsets = (normals * start).sum(axis=1)
-    # Score on evenly spaced points when there are many: neighbours on a dense row say the same,
-    # and this (hypotheses x points) matrix is the detector's hot spot.
     step = -(-n // SCORED_POINTS)
-    distance = normals @ points[::step].T
-    distance -= offsets[:, None]
-    np.abs(distance, out=distance)
-    best = int(np.argmax(np.count_nonzero(distance <= band[::step], axis=1)))
-    return np.abs(points @ normals[best] - offsets[best]) <= band
+    return kernels().line_inliers(points, sigmas, band, first, second, step, min_points)
 
 
 def _segments(
     fit: LineFit, points: Array, sigmas: Array, params: RansacParams
 ) -> list[NDArray[np.intp]]:
     """Cut the points of one line at gaps along it and at kinks; each piece ordered along it."""
-    along = np.array([-fit.normal[1], fit.normal[0]])
-    order = np.argsort(points @ along)
-    gaps = np.diff(points[order] @ along)
-    pieces = np.split(order, np.flatnonzero(gaps > params.max_gap) + 1)
-    done = []
-    while pieces:
-        piece = pieces.pop()
-        cut = bend_split(points[piece], sigmas[piece], params.min_points, params.split_f)
-        if cut is None:
-            done.append(piece)
-        else:
-            pieces += [piece[:cut], piece[cut:]]
-    return done
+    along = points @ np.array([-fit.normal[1], fit.normal[0]])
+    order = np.argsort(along)
+    pieces = kernels().segment_ranges(
+        points, sigmas, along, order, params.max_gap, params.min_points, params.split_f
+    )
+    return [order[a:b] for a, b in pieces.tolist()]
 
 
 @dataclass
@@ -223,22 +218,16 @@ def find_lines(
     rejected: Counter[str] = Counter() if report is None else report.rejected
     lines: list[LineFit] = []
     unsure: list[NDArray[np.intp]] = []  # pieces refused as unsure, for a second look
+    points = np.ascontiguousarray(points, dtype=np.float64)
     remaining = np.arange(len(points))
     sigmas_all = point_sigmas(points, params)
     band_all = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas_all)
     while len(remaining) >= params.min_points and len(lines) < params.max_lines:
         pts, sigmas, band = points[remaining], sigmas_all[remaining], band_all[remaining]
-        mask = _best_hypothesis(pts, band, rng, params.iterations)
-        if mask.sum() < params.min_points:
+        taken = _inliers(pts, sigmas, band, rng, params.iterations, params.min_points)
+        if not len(taken):
             rejected["no line with min_points inliers"] += 1
             break
-        normal, offset = line_through(pts[mask], sigmas[mask])
-        # One refinement: the least-squares line picks up inliers the point pair missed.
-        mask = np.abs(pts @ normal - offset) <= band
-        if mask.sum() < params.min_points:
-            rejected["no line with min_points inliers"] += 1
-            break
-        taken = np.flatnonzero(mask)
         fit = fit_line(pts[taken], sigmas[taken], cov_scale=params.cov_scale)
         accepted = []
         for seg in _segments(fit, pts[taken], sigmas[taken], params):
@@ -301,13 +290,19 @@ def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]
     lines = list(lines)
     for i, j in itertools.combinations(range(len(lines)), 2):
         a, b = lines[i], lines[j]
-        if abs(a.normal[0] * b.normal[1] - a.normal[1] * b.normal[0]) < np.sin(params.corner_angle):
+        (ax, ay), (bx, by) = a.normal.tolist(), b.normal.tolist()
+        cross = ax * by - ay * bx
+        if abs(cross) < math.sin(params.corner_angle):
             continue
-        corner = np.linalg.solve(np.array([a.normal, b.normal]), np.array([a.offset, b.offset]))
+        # Where n_a . p = offset_a and n_b . p = offset_b (Cramer's rule).
+        cx = (a.offset * by - b.offset * ay) / cross
+        cy = (b.offset * ax - a.offset * bx) / cross
         ends = []
         for line in (a, b):
-            distance = np.linalg.norm(np.array([line.p0, line.p1]) - corner, axis=1)
-            ends.append(int(np.argmin(distance)) if distance.min() <= params.corner_reach else None)
+            d0 = math.hypot(line.p0[0] - cx, line.p0[1] - cy)
+            d1 = math.hypot(line.p1[0] - cx, line.p1[1] - cy)
+            ends.append(int(d1 < d0) if min(d0, d1) <= params.corner_reach else None)
+        corner = np.array([cx, cy])
         if None not in ends:
             lines[i], lines[j] = (
                 replace(line, **{("p0", "p1")[end]: corner})

@@ -19,8 +19,10 @@ A frame with a single row is a 2-D scanner's scan and is used as it is.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any, Literal
 
 import numpy as np
@@ -161,71 +163,31 @@ def upright_points(stack: NDArray[np.float32], T_base_sensor: Array) -> NDArray[
     wall seen above it. Of a column's kept points, the one rising highest is taken, then the
     one nearest the band's middle.
     """
-    levels, width = stack.shape[:2]
-    height = _heights(stack, T_base_sensor).astype(np.float64)
-    xy = to_base_xy(stack, T_base_sensor)
-    valid = np.isfinite(height) & np.isfinite(xy).all(axis=-1)
-    rise = np.zeros((levels, width))
-    top = np.full((levels, width), -np.inf)
-    if valid.any():
-        cells = np.floor(xy[valid] / UPRIGHT_CELL).astype(np.int64)
-        low, top[valid] = _spread(cells, height[valid])
-        rise[valid] = top[valid] - low
-    # Per column, the heights it sees; a column with no point at all sees nothing (0).
-    column_top = np.where(valid, height, -np.inf).max(axis=0)
-    column_bottom = np.where(valid, height, np.inf).min(axis=0)
-    seen_any = valid.any(axis=0)
-    visible = np.where(seen_any, column_top - column_bottom, 0.0)
-    band = 0.0
-    if seen_any.any():
-        band = float(column_top[seen_any].max() - column_bottom[seen_any].min())
-    kept = valid & (rise >= np.minimum(UPRIGHT_SHARE * band, UPRIGHT_SHARE * visible))
-    kept &= top >= column_top - UPRIGHT_TOP
-    middle = 0.5 * (levels - 1)
-    preference = np.where(kept, rise - 1e-3 * np.abs(np.arange(levels)[:, None] - middle), -np.inf)
-    best = np.argmax(preference, axis=0)
-    columns = np.arange(width)
-    # The column's point: the mean of its kept points on the best one's spot. A depth camera's
-    # steps (a Kinect's are 4 cm at 3.5 m) fall at other columns on other rows, so the mean
-    # of a wall's heights lies on the wall, where one row's points lie on a staircase.
-    same = kept & (np.linalg.norm(xy - xy[best, columns], axis=-1) <= 2 * UPRIGHT_CELL)
-    weights = same.astype(np.float32)[..., None]
-    with np.errstate(invalid="ignore"):
-        out = (np.nan_to_num(stack) * weights).sum(axis=0) / weights.sum(axis=0)
-    out[~kept[best, columns]] = np.nan
-    return out.astype(np.float32)
+    stack = np.ascontiguousarray(stack, dtype=np.float32)
+    height, xy, valid, keys = _kernels().base_positions(stack, _mount(T_base_sensor), UPRIGHT_CELL)
+    # The column's point is the mean of its kept points on the best one's spot: a depth
+    # camera's steps (a Kinect's are 4 cm at 3.5 m) fall at other columns on other rows, so the
+    # mean of a wall's heights lies on the wall, where one row's points lie on a staircase.
+    return _kernels().upright_choice(
+        stack, height, xy, valid, keys, np.argsort(keys), UPRIGHT_SHARE, UPRIGHT_TOP, UPRIGHT_CELL
+    )
 
 
-_NEIGHBOURS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)], dtype=np.int64)
-_ROW = 1_000_003  # cell key = x * _ROW + y: unique for any floor plan a sensor sees
+@functools.cache  # an import statement costs microseconds even when done: once per process
+def _kernels() -> ModuleType:
+    """The band's compiled loops (``band_kernels``), imported when first used.
 
-
-def _spread(cells: NDArray[np.int64], values: Array) -> tuple[Array, Array]:
-    """Per point, the lowest and highest ``values`` over its floor cell and the 8 around it.
-
-    Worked out per occupied cell, then handed to its points: the keys sorted once, each cell's
-    lowest and highest are reductions over its run of the sorted values, and its neighbours
-    are looked up among the occupied cells (a few hundred), not once per point (thousands).
+    Importing numba takes 0.2 s, which every wallmap command would pay: the configuration,
+    which they all read, imports this module.
     """
-    keys = cells[:, 0] * _ROW + cells[:, 1]
-    order = np.argsort(keys, kind="stable")
-    ordered = keys[order]
-    first = np.concatenate(([True], ordered[1:] != ordered[:-1]))
-    starts = np.flatnonzero(first)
-    unique = ordered[starts]
-    low = np.minimum.reduceat(values[order], starts)
-    high = np.maximum.reduceat(values[order], starts)
-    occupied = cells[order[starts]]  # (U, 2)
-    around = (occupied[None, :, 0] + _NEIGHBOURS[:, 0, None]) * _ROW + (
-        occupied[None, :, 1] + _NEIGHBOURS[:, 1, None]
-    )  # (9, U)
-    where = np.minimum(np.searchsorted(unique, around), unique.size - 1)
-    present = unique[where] == around
-    cell_low = np.where(present, low[where], np.inf).min(axis=0)
-    cell_high = np.where(present, high[where], -np.inf).max(axis=0)
-    cell_of = np.empty(keys.size, dtype=np.int64)
-    cell_of[order] = np.cumsum(first) - 1
-    return cell_low[cell_of], cell_high[cell_of]
+    from wallmap.common import band_kernels  # noqa: PLC0415 - see the docstring
+
+    return band_kernels
+
+
+def _mount(T_base_sensor: Array) -> Array:
+    """The mount as the kernels take it: a contiguous 4x4 of float64."""
+    return np.ascontiguousarray(T_base_sensor, dtype=np.float64)
 
 
 def rows_to_search(how: RowSelection, height: int) -> slice:
@@ -304,16 +266,20 @@ def free_rays(stack: NDArray[np.float32], T_base_sensor: Array) -> tuple[Array, 
     Per sampled column the farthest return of the stack, in the base frame: the space from
     the sensor to it is free at some height of the band, whatever stands nearer below it.
     """
-    origin = T_base_sensor[:2, 3].astype(np.float64)
-    xy = to_base_xy(stack, T_base_sensor)
-    reach = np.linalg.norm(xy - origin, axis=-1)
-    reach[~np.isfinite(reach)] = -1.0
-    farthest = np.argmax(reach, axis=0)
-    columns = np.arange(stack.shape[1])
-    ends = xy[farthest, columns][reach[farthest, columns] > 0]
+    mount = _mount(T_base_sensor)
+    origin = mount[:2, 3].copy()
+    stack = np.ascontiguousarray(stack, dtype=np.float32)
+    _, xy, valid, _ = _kernels().base_positions(stack, mount, UPRIGHT_CELL)
+    ends = _kernels().farthest_ends(xy, valid, float(origin[0]), float(origin[1]))
     if len(ends) > MAX_FREE_RAYS:
-        ends = ends[np.linspace(0, len(ends) - 1, MAX_FREE_RAYS).round().astype(int)]
+        ends = ends[_evenly_spread(len(ends))]
     return origin, ends
+
+
+@functools.lru_cache(maxsize=1024)
+def _evenly_spread(count: int) -> NDArray[np.intp]:
+    """MAX_FREE_RAYS indices spread evenly over ``count``, both ends included."""
+    return np.linspace(0, count - 1, MAX_FREE_RAYS).round().astype(np.intp)
 
 
 def select_scan(

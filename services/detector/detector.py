@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass, field, replace
+import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +44,21 @@ class DetectorConfig:
     scan_ransac: RansacParams = SCANNER
     min_distance: float = 0.1
     seed: int = 0
+
+
+def compile_kernels() -> float:
+    """Make the detector's compiled loops ready; the seconds it took.
+
+    numba compiles them on a machine's first run (about 10 s on two cores) and caches them;
+    afterwards they load in a fraction of a second. Done at a detector's start, so that the
+    first frame does not wait, and by ``make`` after installing.
+    """
+    start = time.perf_counter()
+    from wallmap.common import band_kernels, line_kernels  # noqa: PLC0415 - see scan_row._kernels
+
+    line_kernels.warm_up()
+    band_kernels.warm_up()
+    return time.perf_counter() - start
 
 
 class NoiseLevel:
@@ -92,7 +108,7 @@ class WallDetector:
         origin, rays = (None, None) if is_scanner else free_rays(stack, T_base_sensor)
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
-        params = replace(base, noise_scale=base.noise_scale * noise.scale)
+        params = base.scaled(noise.scale)
         # Sampled afresh for each frame from the seed and the frame's number: a detector that
         # restarts and takes a frame again finds exactly what the first one found.
         rng = np.random.default_rng((self.config.seed, frame.seq))

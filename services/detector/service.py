@@ -28,7 +28,7 @@ from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.detector.detector import DetectorConfig, WallDetector
+from wallmap.services.detector.detector import DetectorConfig, WallDetector, compile_kernels
 
 
 def run(
@@ -48,6 +48,9 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     detector = WallDetector(config)
+    took = compile_kernels()
+    if took > 1.0:
+        log.info("compiled the line search in %.1f s (once; cached for later starts)", took)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
         publisher = declare_history_publisher(session, keys.observations, history.samples())

@@ -94,6 +94,13 @@ def test_compose_and_dockerfile_are_consistent():
         assert (ROOT / name).exists(), f"the Dockerfile copies {name}, which is missing"
         assert not any(fnmatch(name, pattern) for pattern in ignored), f"{name} is docker-ignored"
     assert {".git", ".venv"} <= set(ignored), "the build context leaves the repo's bulk out"
+    # The detector's loops are compiled at build, where the containers' numba cache is.
+    cache = re.search(r"NUMBA_CACHE_DIR=(\S+)", dockerfile)
+    assert cache, "the image keeps numba's cache in a known place"
+    assert f"chown -R wallmap {cache[1]}" in dockerfile, "...which the services' user may read"
+    warm = re.search(r"python -c '([^']+)'", dockerfile)
+    assert warm, "the image compiles the detector's loops at build"
+    subprocess.run([sys.executable, "-c", warm[1]], check=True, timeout=120)
     # The compose player reads the sample bag where the image has it: /app is the repo.
     player_bag = interpolate(services["player"]["command"][1], {})
     assert (ROOT / player_bag.removeprefix("/app/")).is_file()

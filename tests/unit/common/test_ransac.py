@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from wallmap.common.line_fit import fit_line, line_through
+from wallmap.common.line_fit import fit_line
 from wallmap.common.ransac import RansacParams, RowReport, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
 
@@ -102,18 +102,6 @@ def test_band_scan_takes_points_inside_the_height_band_per_column():
     one_row = select_scan(pts, T_base_sensor, RowSelection(mode="row", row_fraction=0.5))
     assert np.isnan(one_row[2]).all()
     assert np.isfinite(one_row[[0, 1, 3, 4]]).all()
-
-
-def test_line_through_is_the_fits_line() -> None:
-    rng = np.random.default_rng(8)
-    for _ in range(50):
-        t = rng.uniform(-2, 2, 40)
-        points = np.column_stack([t, 0.3 * t - 1.5]) + rng.normal(0, 0.01, (40, 2))
-        sigmas = rng.uniform(0.005, 0.03, 40)
-        fit = fit_line(points, sigmas)
-        normal, offset = line_through(points, sigmas)
-        np.testing.assert_allclose(normal, fit.normal, atol=1e-12)
-        assert offset == pytest.approx(fit.offset, abs=1e-12)
 
 
 def far_glimpse(rng, share_of_cluster: bool) -> np.ndarray:

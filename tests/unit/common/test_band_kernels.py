@@ -1,0 +1,78 @@
+"""The compiled band loops against a brute-force numpy statement of the same rule."""
+
+import numpy as np
+import pytest
+
+from wallmap.common import band_kernels
+from wallmap.common.scan_row import (
+    UPRIGHT_CELL,
+    UPRIGHT_SHARE,
+    UPRIGHT_TOP,
+    free_rays,
+    upright_points,
+)
+
+MOUNT = np.array(
+    [[0.0, 0.0, 1.0, 0.1], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.6], [0, 0, 0, 1]]
+)  # an optical frame (z ahead, y down) 0.6 m up
+
+
+def cluttered_stack(rng: np.random.Generator, width: int = 80) -> np.ndarray:
+    """Six heights a column: a wall 3 m ahead, boxes and a table top in front, holes."""
+    heights = np.linspace(1.35, 2.05, 6)[:, None] + rng.normal(0, 0.01, (6, width))
+    ahead = np.full((6, width), 3.0) + rng.normal(0, 0.005, (6, width))
+    box = rng.random(width) < 0.3
+    ahead[:2, box] = 1.5  # boxes up to the second height
+    ahead[3, rng.random(width) < 0.2] = 2.0  # a shelf edge at one height
+    lateral = np.linspace(-1.5, 1.5, width)[None, :] * ahead / 3.0
+    stack = np.stack([-lateral, 0.6 - heights, ahead - 0.1], axis=-1).astype(np.float32)
+    stack[rng.random((6, width)) < 0.1] = np.nan
+    return stack
+
+
+def brute_force_upright(stack: np.ndarray) -> np.ndarray:
+    """Per column, the upright point, every point's spread found by looking at all others."""
+    height = (stack.astype(np.float64) @ MOUNT[2, :3] + MOUNT[2, 3]).astype(np.float64)
+    xy = stack.astype(np.float64) @ MOUNT[:2, :3].T + MOUNT[:2, 3]
+    valid = np.isfinite(height) & np.isfinite(xy).all(axis=-1)
+    cells = np.floor(xy / UPRIGHT_CELL)
+    rise, top = np.zeros(valid.shape), np.full(valid.shape, -np.inf)
+    for k, j in zip(*np.nonzero(valid), strict=True):
+        near = valid & (np.abs(cells - cells[k, j]) <= 1).all(axis=-1)
+        top[k, j] = height[near].max()
+        rise[k, j] = top[k, j] - height[near].min()
+    column_top = np.where(valid, height, -np.inf).max(axis=0)
+    column_bottom = np.where(valid, height, np.inf).min(axis=0)
+    seen = valid.any(axis=0)
+    visible = np.where(seen, column_top - column_bottom, 0.0)
+    band = column_top[seen].max() - column_bottom[seen].min()
+    kept = valid & (rise >= np.minimum(UPRIGHT_SHARE * band, UPRIGHT_SHARE * visible))
+    kept &= top >= column_top - UPRIGHT_TOP
+    out = np.full((stack.shape[1], 3), np.nan, dtype=np.float32)
+    for j in np.flatnonzero(kept.any(axis=0)):
+        levels = np.flatnonzero(kept[:, j])
+        best = levels[np.argmax(rise[levels, j] - 1e-3 * np.abs(levels - 2.5))]
+        same = levels[np.hypot(*(xy[levels, j] - xy[best, j]).T) <= 2 * UPRIGHT_CELL]
+        out[j] = stack[same, j].mean(axis=0)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_upright_points_are_the_brute_force_rule_s(seed: int) -> None:
+    stack = cluttered_stack(np.random.default_rng(seed))
+    found, expected = upright_points(stack, MOUNT), brute_force_upright(stack)
+    np.testing.assert_array_equal(np.isnan(found), np.isnan(expected))
+    np.testing.assert_allclose(found, expected, atol=1e-5, equal_nan=True)
+    assert np.isnan(found[:, 0]).mean() < 0.5  # the wall is found where seen
+
+
+def test_free_rays_end_at_each_column_s_farthest_point() -> None:
+    stack = cluttered_stack(np.random.default_rng(9), width=40)
+    origin, ends = free_rays(stack, MOUNT)
+    xy = stack.astype(np.float64) @ MOUNT[:2, :3].T + MOUNT[:2, 3]
+    reach = np.where(np.isfinite(xy).all(axis=-1), np.hypot(*(xy - origin).transpose(2, 0, 1)), -1)
+    seen = (reach > 0).any(axis=0)
+    expected = xy[reach.argmax(axis=0), np.arange(40)][seen]
+    np.testing.assert_allclose(ends, expected)
+    _, xy_k, valid, _ = band_kernels.base_positions(stack, MOUNT, UPRIGHT_CELL)
+    np.testing.assert_allclose(xy_k[valid], xy[valid])
