@@ -14,7 +14,7 @@ COPY services ./services
 # The detector's loops compiled at build (numba caches them where NUMBA_CACHE_DIR says), so no
 # container spends its first seconds compiling.
 RUN pip install . \
-    && python -c 'from wallmap.services.detector.detector import compile_kernels as c; c()' \
+    && python -c 'from wallmap.common.compiled import compile_all; compile_all()' \
     && useradd --create-home --uid 1000 wallmap \
     && chown -R wallmap /opt/wallmap-kernels \
     && mkdir -p /data && chown wallmap /data

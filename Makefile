@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
 	@# The detector's compiled loops: compiled once here (about 10 s), cached by numba.
-	$(BIN)/python -c 'from wallmap.services.detector.detector import compile_kernels as c; c()'
+	$(BIN)/python -c 'from wallmap.common.compiled import compile_all; compile_all()'
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -25,17 +25,17 @@ from wallmap.launcher import free_loopback_port
 from wallmap.scene import Camera, write_scene_bag
 
 
-def read_clouds(bag: Path) -> float:
-    """Seconds to read and deserialize every point cloud, and nothing else."""
+def read_sensor(bag: Path, msgtype: str = "sensor_msgs/msg/PointCloud2") -> float:
+    """Seconds to read and deserialize every sensor message of ``msgtype``, and nothing else."""
     start = time.perf_counter()
     with AnyReader([bag]) as reader:
-        conns = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/PointCloud2"]
+        conns = [c for c in reader.connections if c.msgtype == msgtype]
         for conn, _, raw in reader.messages(connections=conns):
             reader.deserialize(raw, conn.msgtype)
     return time.perf_counter() - start
 
 
-def read_floor(bag: Path) -> float:
+def read_floor(bag: Path, msgtype: str = "sensor_msgs/msg/PointCloud2") -> float:
     """The floor, measured in a fresh process set up like the player's, after one untimed pass.
 
     The player reads the whole bag once (tf, poses) before it times anything, and keeps large
@@ -43,10 +43,11 @@ def read_floor(bag: Path) -> float:
     """
     code = (
         "import sys, end_to_end as e; from wallmap.common.allocator import keep_large_buffers; "
-        "keep_large_buffers(); p = e.Path(sys.argv[1]); e.read_clouds(p); print(e.read_clouds(p))"
+        "keep_large_buffers(); p, t = e.Path(sys.argv[1]), sys.argv[2]; e.read_sensor(p, t); "
+        "print(e.read_sensor(p, t))"
     )
     out = subprocess.run(
-        [sys.executable, "-c", code, str(bag)],
+        [sys.executable, "-c", code, str(bag), msgtype],
         cwd=Path(__file__).parent,
         capture_output=True,
         text=True,

@@ -54,28 +54,35 @@ def _cpu(proc: subprocess.Popen[str]) -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run_once(tree: Path, bag: Path, player_args: tuple[str, ...]) -> dict[str, float]:
-    """One recording through the services of ``tree``: seconds and CPU seconds per process."""
+def run_once(
+    tree: Path, bag: Path, player_args: tuple[str, ...], odometry: bool = False
+) -> dict[str, float]:
+    """One recording through the services of ``tree``: seconds and CPU seconds per process.
+
+    ``odometry``: an odometry service makes the poses from the scans.
+    """
     env = {**os.environ, "PYTHONPATH": str(tree), "WALLMAP_LOG": "WARNING"}
     endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
     wallmap = [sys.executable, "-m", "wallmap"]
     quiet = {"env": env, "cwd": tempfile.gettempdir(), "stderr": subprocess.DEVNULL}
-    services = [
-        subprocess.Popen([*wallmap, "router", "--listen", endpoint], **quiet),
-        subprocess.Popen([*wallmap, "mapper", "--connect", endpoint], **quiet),
-        subprocess.Popen([*wallmap, "detector", "--connect", endpoint], **quiet),
+    names = ("router", "mapper", "detector", *(("odometry",) if odometry else ()))
+    services = [subprocess.Popen([*wallmap, "router", "--listen", endpoint], **quiet)]
+    services += [
+        subprocess.Popen([*wallmap, name, "--connect", endpoint], **quiet) for name in names[1:]
     ]
     play = [*wallmap, "player", str(bag), "--fast", "--connect", endpoint, *player_args]
+    if odometry:
+        play += ["--pose-source", "none", "--wait-for", ",".join(names[1:])]
     player = subprocess.Popen(play, stdout=subprocess.PIPE, text=True, **quiet)
     out = player.stdout.read() if player.stdout else ""
     result = {"player": _cpu(player)}
-    for name, proc in reversed(list(zip(("router", "mapper", "detector"), services, strict=True))):
-        proc.terminate()  # the detector and the mapper first, while their router is there
+    for name, proc in reversed(list(zip(names, services, strict=True))):
+        proc.terminate()  # the services first, while their router is there
         result[name] = _cpu(proc)
     found = re.search(r"in ([\d.]+) s .* integrated (\d+)", out)
     if player.returncode or found is None:
         raise SystemExit(f"{tree}: the player failed on {bag}:\n{out}")
-    result["seconds"] = float(found[1])
+    result["seconds"], result["frames"] = float(found[1]), int(found[2])
     return result
 
 

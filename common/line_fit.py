@@ -9,13 +9,13 @@ the two independent. Both are mapped to (u, v) by the Jacobian of ``(u, v) = (n 
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
-from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
+
+from wallmap.common.compiled import line_kernels, plain
 
 Array = NDArray[np.float64]
 
@@ -56,18 +56,6 @@ class LineFit:
         return math.hypot(self.p1[0] - self.p0[0], self.p1[1] - self.p0[1])
 
 
-@functools.cache  # an import statement costs microseconds even when done: once per process
-def kernels() -> ModuleType:
-    """The line search's compiled loops (``line_kernels``), imported when first used.
-
-    Importing numba takes 0.2 s, which every wallmap command would pay: the configuration,
-    which they all read, imports this module.
-    """
-    from wallmap.common import line_kernels  # noqa: PLC0415 - see the docstring
-
-    return line_kernels
-
-
 def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1.0) -> LineFit:
     """Fit a line to ``points`` (N x 2, N >= 2) by weighted total least squares.
 
@@ -80,11 +68,11 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
             camera's errors are), which the independent-points formula underestimates.
     """
     n = len(points)
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    weights = np.ones(n) if sigmas is None else 1.0 / (sigmas * sigmas)
-    nx, ny, offset, cx, cy, total = kernels().weighted_line(points, weights)
+    points = plain(points, np.float64)
+    weights = np.ones(n) if sigmas is None else plain(1.0 / (sigmas * sigmas), np.float64)
+    nx, ny, offset, cx, cy, total = line_kernels().weighted_line(points, weights)
     # Positions t along the line and residuals r across it, summed in one pass.
-    wtt, wrr, rr, t_min, t_max = kernels().line_spread(points, weights, nx, ny, cx, cy)
+    wtt, wrr, rr, t_min, t_max = line_kernels().line_spread(points, weights, nx, ny, cx, cy)
     chi2_per_dof = wrr / max(n - 2, 1)
     scale2 = chi2_per_dof if sigmas is None else max(chi2_per_dof, 1.0)
     var_angle = scale2 / max(wtt, 1e-12)
@@ -133,7 +121,7 @@ def bend_split(points: Array, sigmas: Array, min_points: int, f_threshold: float
     Returns:
         the size of the first part, or None to keep one line.
     """
-    cut = kernels().bend_cut(
-        np.ascontiguousarray(points, dtype=np.float64), sigmas, min_points, f_threshold
+    cut = line_kernels().bend_cut(
+        plain(points, np.float64), plain(sigmas, np.float64), min_points, f_threshold
     )
     return None if cut < 0 else cut

@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common.compiled import line_kernels, plain
 from wallmap.common.config_file import require
-from wallmap.common.line_fit import LineFit, bend_split, fit_line, kernels
+from wallmap.common.line_fit import LineFit, bend_split, fit_line
 
 Array = NDArray[np.float64]
 SCORED_POINTS = 256  # hypotheses are scored on about this many points of a cluster
@@ -142,9 +143,7 @@ def split_at_nans(
     wall (a quarter of them on a cheap one), so for it runs of up to ``nan_run`` invalid points
     do not split, and a jump of more than ``max_jump`` (m) between neighbours does.
     """
-    index, starts = kernels().cluster_bounds(
-        np.ascontiguousarray(points, dtype=np.float64), nan_run, max_jump
-    )
+    index, starts = line_kernels().cluster_bounds(plain(points, np.float64), nan_run, max_jump)
     return [index[a:b] for a, b in itertools.pairwise(starts.tolist())]
 
 
@@ -167,7 +166,7 @@ def _inliers(
     first = rng.integers(0, n, iterations)
     second = (first + rng.integers(1, n, iterations)) % n  # never the same point
     step = -(-n // SCORED_POINTS)
-    return kernels().line_inliers(points, sigmas, band, first, second, step, min_points)
+    return line_kernels().line_inliers(points, sigmas, band, first, second, step, min_points)
 
 
 def _segments(
@@ -176,7 +175,7 @@ def _segments(
     """Cut the points of one line at gaps along it and at kinks; each piece ordered along it."""
     along = points @ np.array([-fit.normal[1], fit.normal[0]])
     order = np.argsort(along)
-    pieces = kernels().segment_ranges(
+    pieces = line_kernels().segment_ranges(
         points, sigmas, along, order, params.max_gap, params.min_points, params.split_f
     )
     return [order[a:b] for a, b in pieces.tolist()]
@@ -218,7 +217,7 @@ def find_lines(
     rejected: Counter[str] = Counter() if report is None else report.rejected
     lines: list[LineFit] = []
     unsure: list[NDArray[np.intp]] = []  # pieces refused as unsure, for a second look
-    points = np.ascontiguousarray(points, dtype=np.float64)
+    points = plain(points, np.float64)
     remaining = np.arange(len(points))
     sigmas_all = point_sigmas(points, params)
     band_all = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas_all)

@@ -22,13 +22,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from types import ModuleType
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.codec import MessageError
+from wallmap.common.compiled import band_kernels, plain
 
 Array = NDArray[np.float64]
 SEARCHED_ROWS = 64  # the band is looked for on about this many image rows (up to twice)
@@ -163,31 +163,16 @@ def upright_points(stack: NDArray[np.float32], T_base_sensor: Array) -> NDArray[
     wall seen above it. Of a column's kept points, the one rising highest is taken, then the
     one nearest the band's middle.
     """
-    stack = np.ascontiguousarray(stack, dtype=np.float32)
-    height, xy, valid, keys = _kernels().base_positions(stack, _mount(T_base_sensor), UPRIGHT_CELL)
+    stack = plain(stack, np.float32)
+    height, xy, valid, keys = band_kernels().base_positions(
+        stack, plain(T_base_sensor, np.float64), UPRIGHT_CELL
+    )
     # The column's point is the mean of its kept points on the best one's spot: a depth
     # camera's steps (a Kinect's are 4 cm at 3.5 m) fall at other columns on other rows, so the
     # mean of a wall's heights lies on the wall, where one row's points lie on a staircase.
-    return _kernels().upright_choice(
+    return band_kernels().upright_choice(
         stack, height, xy, valid, keys, np.argsort(keys), UPRIGHT_SHARE, UPRIGHT_TOP, UPRIGHT_CELL
     )
-
-
-@functools.cache  # an import statement costs microseconds even when done: once per process
-def _kernels() -> ModuleType:
-    """The band's compiled loops (``band_kernels``), imported when first used.
-
-    Importing numba takes 0.2 s, which every wallmap command would pay: the configuration,
-    which they all read, imports this module.
-    """
-    from wallmap.common import band_kernels  # noqa: PLC0415 - see the docstring
-
-    return band_kernels
-
-
-def _mount(T_base_sensor: Array) -> Array:
-    """The mount as the kernels take it: a contiguous 4x4 of float64."""
-    return np.ascontiguousarray(T_base_sensor, dtype=np.float64)
 
 
 def rows_to_search(how: RowSelection, height: int) -> slice:
@@ -266,11 +251,11 @@ def free_rays(stack: NDArray[np.float32], T_base_sensor: Array) -> tuple[Array, 
     Per sampled column the farthest return of the stack, in the base frame: the space from
     the sensor to it is free at some height of the band, whatever stands nearer below it.
     """
-    mount = _mount(T_base_sensor)
+    mount = plain(T_base_sensor, np.float64)
     origin = mount[:2, 3].copy()
-    stack = np.ascontiguousarray(stack, dtype=np.float32)
-    _, xy, valid, _ = _kernels().base_positions(stack, mount, UPRIGHT_CELL)
-    ends = _kernels().farthest_ends(xy, valid, float(origin[0]), float(origin[1]))
+    stack = plain(stack, np.float32)
+    _, xy, valid, _ = band_kernels().base_positions(stack, mount, UPRIGHT_CELL)
+    ends = band_kernels().farthest_ends(xy, valid, float(origin[0]), float(origin[1]))
     if len(ends) > MAX_FREE_RAYS:
         ends = ends[_evenly_spread(len(ends))]
     return origin, ends

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import statistics
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,21 +43,6 @@ class DetectorConfig:
     scan_ransac: RansacParams = SCANNER
     min_distance: float = 0.1
     seed: int = 0
-
-
-def compile_kernels() -> float:
-    """Make the detector's compiled loops ready; the seconds it took.
-
-    numba compiles them on a machine's first run (about 10 s on two cores) and caches them;
-    afterwards they load in a fraction of a second. Done at a detector's start, so that the
-    first frame does not wait, and by ``make`` after installing.
-    """
-    start = time.perf_counter()
-    from wallmap.common import band_kernels, line_kernels  # noqa: PLC0415 - see scan_row._kernels
-
-    line_kernels.warm_up()
-    band_kernels.warm_up()
-    return time.perf_counter() - start
 
 
 class NoiseLevel:

@@ -18,6 +18,7 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
+from wallmap.common.compiled import compile_all
 from wallmap.common.delivery import (
     History,
     declare_history_publisher,
@@ -28,7 +29,7 @@ from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
-from wallmap.services.detector.detector import DetectorConfig, WallDetector, compile_kernels
+from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
 
 def run(
@@ -48,7 +49,7 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     detector = WallDetector(config)
-    took = compile_kernels()
+    took = compile_all()
     if took > 1.0:
         log.info("compiled the line search in %.1f s (once; cached for later starts)", took)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)

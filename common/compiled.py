@@ -1,0 +1,55 @@
+"""How the compiled loops are reached: imported when first used, fed one kind of array.
+
+The loops (``line_kernels``, ``band_kernels``) are numba functions. Importing numba takes 0.2 s,
+which every wallmap command would pay, since the configuration they all read imports the
+modules that call the loops; so those modules reach them through these functions instead.
+
+numba compiles a loop once per kind of array it is given: read-only (a frame decoded from the
+wire) or not, contiguous or not, each dtype. ``plain`` hands them one kind only, so the loops
+compiled at install (``compile_all``) are the ones every frame uses, and none is compiled in
+the middle of a run.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+from numpy.typing import DTypeLike, NDArray
+
+
+@functools.cache  # an import statement costs microseconds even when done: once per process
+def line_kernels() -> ModuleType:
+    """``common/line_kernels.py``: the line search's loops."""
+    from wallmap.common import line_kernels as module  # noqa: PLC0415 - see the module's doc
+
+    return module
+
+
+@functools.cache
+def band_kernels() -> ModuleType:
+    """``common/band_kernels.py``: the band stack's loops."""
+    from wallmap.common import band_kernels as module  # noqa: PLC0415 - see the module's doc
+
+    return module
+
+
+def plain(array: Any, dtype: DTypeLike) -> NDArray[Any]:
+    """``array`` as the loops take it: C-contiguous, writeable, ``dtype`` (copied if need be)."""
+    return np.require(array, dtype, ["C_CONTIGUOUS", "WRITEABLE", "ALIGNED"])
+
+
+def compile_all() -> float:
+    """Make every loop ready (compiled, or loaded from numba's cache); the seconds it took.
+
+    numba compiles them on a machine's first run (about 10 s on two cores) and caches them;
+    afterwards they load in a fraction of a second. Done at a detector's start, so that the
+    first frame does not wait, and by ``make`` after installing.
+    """
+    start = time.perf_counter()
+    line_kernels().warm_up()
+    band_kernels().warm_up()
+    return time.perf_counter() - start

@@ -1,0 +1,45 @@
+"""The compiled loops: compiled once, for the arrays every frame brings; numba loaded lazily."""
+
+import subprocess
+import sys
+
+import numpy as np
+from test_band_kernels import MOUNT, cluttered_stack
+
+from wallmap.common import band_kernels, line_kernels
+from wallmap.common.compiled import compile_all
+from wallmap.common.messages import Frame, pack, unpack_frame
+from wallmap.services.detector.detector import DetectorConfig, WallDetector
+
+
+def kernels() -> dict[str, object]:
+    return {
+        f"{module.__name__}.{name}": value
+        for module in (line_kernels, band_kernels)
+        for name, value in vars(module).items()
+        if hasattr(value, "signatures")
+    }
+
+
+def test_a_frame_from_the_wire_runs_the_loops_compiled_at_install() -> None:
+    """A decoded frame's arrays are read-only: were they handed on as they are, numba would
+    compile every loop again for them, seconds in the middle of a run."""
+    compile_all()
+    before = {name: list(k.signatures) for name, k in kernels().items()}
+    assert all(len(s) <= 1 for s in before.values()), before  # helpers: inlined, none
+    detector = WallDetector(DetectorConfig())
+    for seq in range(5):
+        stack = cluttered_stack(np.random.default_rng(seq), width=160)
+        sent = Frame("run", seq, 0.1 * seq, "camera", stack, MOUNT, band=(1.3, 2.1))
+        frame = unpack_frame(pack(sent))
+        assert not frame.points.flags.writeable
+        assert detector.detect(frame).walls, "the wall 3 m ahead is seen"
+    after = {name: list(k.signatures) for name, k in kernels().items()}
+    assert after == before
+
+
+def test_the_configuration_does_not_load_numba() -> None:
+    """Every wallmap command reads the configuration; numba's 0.2 s is the detector's alone."""
+    code = "import sys, wallmap.config, wallmap.cli; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
