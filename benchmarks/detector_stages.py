@@ -32,11 +32,12 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--height", type=int, default=240)
+    parser.add_argument("--sensor", default="depth16", choices=("depth16", "pointcloud"))
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         bag = Path(folder) / "depth"
         camera = Camera(width=args.width, height=args.height)
-        write_scene_bag(bag, seed=7, n_frames=args.frames, fmt="ros2-mcap", sensor="depth16",
+        write_scene_bag(bag, seed=7, n_frames=args.frames, fmt="ros2-mcap", sensor=args.sensor,
                         camera=camera)  # fmt: skip
         config = Config()
         pipeline = pipeline_for(config)
@@ -66,7 +67,7 @@ def main() -> None:
         detector.detect(frame)
         whole.append(time.perf_counter() - start)
     total = statistics.median(whole)
-    print(f"{len(frames)} frames of {args.width}x{args.height} depth, "
+    print(f"{len(frames)} frames of {args.width}x{args.height} {args.sensor}, "
           f"{frames[0].points.shape[0]} heights a column\n")  # fmt: skip
     print("| stage | what | ms / frame (median) | share of detect |")
     print("|---|---|---:|---:|")
