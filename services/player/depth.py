@@ -16,17 +16,20 @@ _MM_TO_M = np.float32(0.001)
 
 
 @lru_cache(maxsize=8)
-def _rays(height: int, width: int, intrinsics: tuple[float, float, float, float]) -> np.ndarray:
-    """Ray directions with z = 1 for every pixel of a pinhole camera, read-only (h, w, 3)."""
+def _rays(
+    height: int, width: int, intrinsics: tuple[float, float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """A pinhole camera's rays with z = 1: x per image column (w,), y per row (h,); read-only.
+
+    Two vectors, not an (h, w, 3) cube: multiplying the depths axis by axis is several times
+    faster than broadcasting them over the cube's last axis of 3.
+    """
     fx, fy, cx, cy = intrinsics
-    u = (np.arange(width, dtype=np.float64) - cx) / fx
-    v = (np.arange(height, dtype=np.float64) - cy) / fy
-    rays = np.empty((height, width, 3), dtype=np.float32)
-    rays[..., 0] = u[np.newaxis, :]
-    rays[..., 1] = v[:, np.newaxis]
-    rays[..., 2] = 1.0
-    rays.flags.writeable = False
-    return rays
+    x = ((np.arange(width, dtype=np.float64) - cx) / fx).astype(np.float32)
+    y = ((np.arange(height, dtype=np.float64) - cy) / fy).astype(np.float32)
+    x.flags.writeable = False
+    y.flags.writeable = False
+    return x, y
 
 
 def _intrinsics(camera_info: Any) -> tuple[float, float, float, float]:
@@ -114,4 +117,9 @@ def back_project(
         intrinsics: (fx, fy, cx, cy) in pixels.
         rows: Which rows ``depth`` holds.
     """
-    return _rays(*size, intrinsics)[rows] * depth[..., np.newaxis]
+    x, y = _rays(*size, intrinsics)
+    points = np.empty((*depth.shape, 3), dtype=np.float32)
+    np.multiply(depth, x, out=points[..., 0])
+    np.multiply(depth, y[rows, np.newaxis], out=points[..., 1])
+    points[..., 2] = depth
+    return points
