@@ -31,12 +31,26 @@ PROCESSES = ("player", "detector", "mapper", "odometry", "router")
 def bags(folder: Path, scale: float) -> dict[str, tuple[Path, str, bool]]:
     """The three bags: name -> (path, sensor message type, poses by odometry)."""
     cloud, depth, lidar = folder / "cloud.bag", folder / "depth", folder / "lidar.bag"
-    write_scene_bag(cloud, seed=7, n_frames=round(450 * scale), fmt="ros1", sensor="pointcloud",
-                    camera=Camera(width=640, height=480), rate_hz=30.0)  # fmt: skip
-    write_scene_bag(depth, seed=7, n_frames=round(784 * scale), fmt="ros2-mcap",
-                    sensor="depth16", camera=Camera(width=320, height=240))  # fmt: skip
-    write_scene_bag(lidar, seed=7, n_frames=round(1000 * scale), fmt="ros1", sensor="laserscan",
-                    rate_hz=15.0)  # fmt: skip
+    write_scene_bag(
+        cloud,
+        seed=7,
+        n_frames=round(450 * scale),
+        fmt="ros1",
+        sensor="pointcloud",
+        camera=Camera(width=640, height=480),
+        rate_hz=30.0,
+    )
+    write_scene_bag(
+        depth,
+        seed=7,
+        n_frames=round(784 * scale),
+        fmt="ros2-mcap",
+        sensor="depth16",
+        camera=Camera(width=320, height=240),
+    )
+    write_scene_bag(
+        lidar, seed=7, n_frames=round(1000 * scale), fmt="ros1", sensor="laserscan", rate_hz=15.0
+    )
     return {
         "ROS 1, 640x480 PointCloud2": (cloud, CLOUD, False),
         "ROS 2 mcap, 320x240 depth 16UC1": (depth, IMAGE, False),
@@ -49,8 +63,12 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--scale", type=float, default=1.0, help="bag lengths, times the issue's")
     args = parser.parse_args()
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-                            capture_output=True, text=True, check=False).stdout.strip()  # fmt: skip
+    commit = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.strip()
     floors: dict[str, list[float]] = {}
     runs: dict[str, list[dict[str, float]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -62,20 +80,26 @@ def main() -> None:
                 runs.setdefault(name, []).append(run_once(ROOT, bag, (), odometry=odometry))
                 frames[name] = runs[name][-1]["frames"]
     print(f"commit {commit or '?'}, medians of {args.rounds} rounds, 2-core shared machine\n")
-    print("| bag | frames | floor s | pipeline s | floor / pipeline (spread) | CPU ms / frame: "
-          + ", ".join(PROCESSES) + " |")  # fmt: skip
+    print(
+        "| bag | frames | floor s | pipeline s | floor / pipeline (spread) | CPU ms / frame: "
+        + ", ".join(PROCESSES)
+        + " |"
+    )
     print("|---|---:|---:|---:|---|---|")
     for name, done in runs.items():
         ratios = sorted(f / r["seconds"] for f, r in zip(floors[name], done, strict=True))
         cpu = [
             f"{1e3 * statistics.median(r[p] for r in done) / frames[name]:.2f}"
-            if p in done[0] else "-"
+            if p in done[0]
+            else "-"
             for p in PROCESSES
-        ]  # fmt: skip
-        print(f"| {name} | {frames[name]:.0f} | {statistics.median(floors[name]):.2f} | "
-              f"{statistics.median(r['seconds'] for r in done):.2f} | "
-              f"{statistics.median(ratios):.2f} ({ratios[0]:.2f}-{ratios[-1]:.2f}) | "
-              f"{', '.join(cpu)} |")  # fmt: skip
+        ]
+        print(
+            f"| {name} | {frames[name]:.0f} | {statistics.median(floors[name]):.2f} | "
+            f"{statistics.median(r['seconds'] for r in done):.2f} | "
+            f"{statistics.median(ratios):.2f} ({ratios[0]:.2f}-{ratios[-1]:.2f}) | "
+            f"{', '.join(cpu)} |"
+        )
 
 
 if __name__ == "__main__":

@@ -34,8 +34,9 @@ def until_line(
 ) -> tuple[float, subprocess.Popen[str]]:
     """Launch ``command``; the seconds until a line of its log holds ``marker``."""
     start = time.perf_counter()
-    proc = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
-                            env=ENV)  # fmt: skip
+    proc = subprocess.Popen(
+        command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=ENV
+    )
     assert proc.stderr is not None
     for line in proc.stderr:
         if marker in line:
@@ -49,8 +50,11 @@ def until_line(
 def router_ready(port: int) -> tuple[float, subprocess.Popen[str]]:
     """Launch a router on ``port``; the seconds until the port takes a connection."""
     start = time.perf_counter()
-    proc = subprocess.Popen([*WALLMAP, "router", "--listen", f"tcp/127.0.0.1:{port}"],
-                            stderr=subprocess.DEVNULL, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [*WALLMAP, "router", "--listen", f"tcp/127.0.0.1:{port}"],
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
     while True:
         try:
             socket.create_connection(("127.0.0.1", port), timeout=0.05).close()
@@ -86,8 +90,14 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         bag = Path(folder) / "depth"
-        write_scene_bag(bag, seed=7, n_frames=60, fmt="ros2-mcap", sensor="depth16",
-                        camera=Camera(width=320, height=240))  # fmt: skip
+        write_scene_bag(
+            bag,
+            seed=7,
+            n_frames=60,
+            fmt="ros2-mcap",
+            sensor="depth16",
+            camera=Camera(width=320, height=240),
+        )
         rounds = [one_round(bag) for _ in range(args.rounds)]
     print(f"seconds from launch to ready, {args.rounds} rounds (warm page cache, numba cache)\n")
     print("| service | median s | min s | max s |")

@@ -129,10 +129,16 @@ def _column_extents(
 
 @njit(cache=True, nogil=True)
 def upright_choice(
-    stack: Stack, height: NDArray[np.float32], xy: Array, valid: NDArray[np.bool_],
-    keys: NDArray[np.int64], order: NDArray[np.intp], share: float, top_reach: float,
+    stack: Stack,
+    height: NDArray[np.float32],
+    xy: Array,
+    valid: NDArray[np.bool_],
+    keys: NDArray[np.int64],
+    order: NDArray[np.intp],
+    share: float,
+    top_reach: float,
     cell: float,
-) -> Stack:  # fmt: skip
+) -> Stack:
     """``scan_row.upright_points`` from ``base_positions``' and the cells' sorting."""
     levels, width = valid.shape
     values = np.empty(keys.shape[0])

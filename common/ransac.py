@@ -154,9 +154,13 @@ def point_sigmas(points: Array, params: RansacParams) -> Array:
 
 
 def _inliers(
-    points: Array, sigmas: Array, band: Array, rng: np.random.Generator, iterations: int,
+    points: Array,
+    sigmas: Array,
+    band: Array,
+    rng: np.random.Generator,
+    iterations: int,
     min_points: int,
-) -> NDArray[np.intp]:  # fmt: skip
+) -> NDArray[np.intp]:
     """Inliers of the best of ``iterations`` two-point hypotheses, refitted once; may be empty.
 
     Hypotheses are scored on evenly spaced points when there are many (neighbours on a dense
