@@ -114,22 +114,16 @@ class LatencyEstimator:
         self._last: tuple[float, Array] | None = None
         self.added = 0  # turns ever added: the kept ones stop growing in number once full
 
-    def add(self, stamp: float, closest: Array) -> bool:
-        """A frame's stamp and its lines' closest points (n, 2), in the robot frame.
-
-        True when they gave a turn (the lines matched the last frame's).
-        """
-        added = False
+    def add(self, stamp: float, closest: Array) -> None:
+        """A frame's stamp and its lines' closest points (n, 2), in the robot frame."""
         if self._last is not None and 0.0 < stamp - self._last[0] < 0.5:
             turn = line_turn(self._last[1], closest)
             if turn is not None:
                 self._turns.append((self._last[0], stamp, turn))
                 self.added += 1
-                added = True
         elif self._last is not None and stamp < self._last[0]:
             self._turns.clear()  # time went back: another run
         self._last = (stamp, closest)
-        return added
 
     def to_json(self) -> dict[str, Any]:
         """The turns kept and the last frame's lines (a state file's)."""

@@ -56,7 +56,7 @@ MAX_LATENCY = 0.5  # s: a player sends poses this far past each frame, and a bit
 TAIL = 4.0  # a frame the walls contradict is tried again with the source's noise this much wider
 ADOPT_AFTER = 10.0  # s of recovered frames agreeing on one new offset: the source moved for good
 SUSPECT_FOR = 5.0  # s after a jump that the walls neither confirmed nor refuted: it was real
-LATENCY_EVERY = 10  # new turns between two latency estimates
+LATENCY_EVERY = 10  # turns between two latency estimates
 # s: a first latency estimate this far from the guess remaps the frames so far. Nearer, the
 # early walls are off by what the judge corrects frame by frame anyway, and mapping a third of
 # a run again would cost it half as much time again (the Jackal: +23 ms, 171 frames, 1.5 s).
@@ -214,15 +214,14 @@ class PoseJudge:
         return Verdict(_as_pose(source.pose, stamp, x0, cov), "unjudged", start_walls=steady)
 
     def _learn_latency(self, frame: Observations, poses: PoseBuffer) -> None:
-        """The frame's lines into the turning history; every LATENCY_EVERY new turns, re-estimate.
+        """The frame's lines into the turning history; every LATENCY_EVERY turns, re-estimate.
 
         Counted as turns come, not as the history's length: a full history keeps its length,
         and an estimate reads all of it (a few ms), which every frame cannot afford.
         """
         if self.config.latency is not None or not frame.walls:
             return
-        if not self.turns.add(frame.stamp, np.array([w.closest for w in frame.walls])):
-            return
+        self.turns.add(frame.stamp, np.array([w.closest for w in frame.walls]))
         span = self.turns.span()
         if self.turns.added % LATENCY_EVERY or span is None:
             return
