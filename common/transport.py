@@ -333,6 +333,16 @@ class Keys:
         return f"{self.prefix}/map/updates"
 
     @property
+    def map_rooms(self) -> str:
+        """Queryable: the rooms and the doors between them (``services.mapper.room_map``)."""
+        return f"{self.prefix}/map/rooms"
+
+    @property
+    def map_rooms_updates(self) -> str:
+        """The rooms' payload again, published by the mapper when the rooms changed."""
+        return f"{self.prefix}/map/rooms/updates"
+
+    @property
     def progress(self) -> str:
         """Mapper acknowledgements of the frames of each player run."""
         return f"{self.prefix}/mapper/progress"

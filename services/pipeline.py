@@ -27,6 +27,7 @@ from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig, SourcePose
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge, sweep_widened
+from wallmap.services.mapper.room_map import RoomMap
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
@@ -63,6 +64,7 @@ class Mapping:
         if judged is None and judge.enabled and corrector is None:
             judged = PoseJudge(judge)
         self.judge = judged
+        self.rooms = RoomMap()  # the floor each integrated frame saw, segmented on demand
         self.latency = judge.latency or 0.0  # of poses taken as they come
         self.lookahead = judge.lookahead()
         # The first frames' observations, kept until the latency is known (PoseJudge.settled);
@@ -81,6 +83,8 @@ class Mapping:
         if it is far from the guess they were mapped with (``_remap``).
         """
         pose = self._integrate(observations, source)
+        if pose is not None:
+            self.rooms.add_frame(pose.vector, observations.ray_origin, observations.rays)
         if self._early is not None and self.judge is not None:
             self._early.append(observations)
             if self.judge.remap_due:

@@ -7,6 +7,7 @@ Every failure a person can cause (a missing bag, a bad flag, no router) ends wit
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import os
@@ -39,7 +40,7 @@ from wallmap.doctor import add_command as add_doctor_command
 from wallmap.export import write_geojson
 from wallmap.foxglove_cli import add_commands as add_foxglove_commands
 from wallmap.launcher import LaunchError, demo, up, up_live
-from wallmap.map_client import format_table, to_json
+from wallmap.map_client import fetch_rooms, format_rooms, format_table, to_json
 from wallmap.options import (
     BAND,
     DETECTOR,
@@ -157,6 +158,11 @@ def _fetch(args: argparse.Namespace, config: Config, **parameters: str) -> MapRe
 
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
+    if args.rooms:
+        with open_session(config.zenoh) as session:
+            body = fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout)
+        print(json.dumps(body, indent=1) if args.json else format_rooms(body))
+        return 0
     filters = {"bbox": args.bbox, "since": None if args.since is None else repr(args.since)}
     reply = _fetch(args, config, **{k: v for k, v in filters.items() if v is not None})
     print(to_json(reply) if args.json else format_table(reply))
@@ -309,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_map_filters(p)
     p.add_argument("--bbox", metavar="XMIN,YMIN,XMAX,YMAX", help="walls crossing this box (m)")
     p.add_argument("--since", type=float, metavar="STAMP", help="walls seen since this stamp")
+    p.add_argument("--rooms", action="store_true", help="the rooms and doors instead of the walls")
 
     p = add_command(sub, "status", "the live services and their counters", _cmd_status, ZENOH)
     p.add_argument("--json", action="store_true", help="JSON instead of a table")

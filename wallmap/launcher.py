@@ -33,7 +33,7 @@ from wallmap.common.transport import (
     open_session,
 )
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
-from wallmap.map_client import format_table, to_json
+from wallmap.map_client import fetch_rooms, format_table, to_json
 from wallmap.services.player.service import PlayerSettings
 
 if TYPE_CHECKING:
@@ -275,6 +275,7 @@ def _report(
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)
         reply = fetch_map(session, Keys(config.zenoh.prefix), query)
+        rooms = fetch_rooms(session, Keys(config.zenoh.prefix)) if options.json_out else None
     if partial:
         print(f"stopped before the end of the recording: the map of its first {reply.frames} "
               "frames")  # fmt: skip
@@ -289,7 +290,7 @@ def _report(
         plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
     if options.json_out:
-        document = to_json(reply, config=to_plain(config), partial=partial)
+        document = to_json(reply, config=to_plain(config), partial=partial, rooms=rooms)
         options.json_out.write_text(document, "utf-8")
     if options.picture:
         write_picture(options.picture, reply)

@@ -1,12 +1,17 @@
-"""The wall map for people: a table, the contract's JSON."""
+"""The wall map for people: a table, the contract's JSON; the rooms, fetched and printed."""
 
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from wallmap.common.codec import SCHEMA_VERSION
+from wallmap.common.codec import SCHEMA_VERSION, MessageError, decode
+from wallmap.common.map_query import MalformedReplyError, QueryError
 from wallmap.common.map_records import MapReply
+from wallmap.common.transport import Keys
+
+if TYPE_CHECKING:
+    import zenoh
 
 
 def format_table(reply: MapReply) -> str:
@@ -52,3 +57,48 @@ def _count(n: int, thing: str) -> str:
 def to_json(reply: MapReply, **extra: Any) -> str:
     """The reply as the contract's JSON document (``extra`` fields added at its top)."""
     return json.dumps({"v": SCHEMA_VERSION, **reply.to_map(), **extra}, indent=1)
+
+
+def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
+    """Ask ``{prefix}/map/rooms``; the contract's payload, checked for its two lists.
+
+    Raises:
+        QueryError: no mapper answered, it refused, or its reply is unreadable.
+    """
+    for reply in session.get(keys.map_rooms, timeout=timeout):
+        if reply.ok is None:
+            raise QueryError(f"the mapper refused the query: {reply.err.payload.to_string()}")
+        try:
+            body = decode(reply.ok.payload.to_bytes())
+        except MessageError as err:
+            raise MalformedReplyError(f"the rooms reply is unreadable: {err}") from err
+        if not isinstance(body, dict) or not all(
+            isinstance(body.get(k), list) for k in ("rooms", "doors")
+        ):
+            raise MalformedReplyError("the rooms reply has no 'rooms' and 'doors' lists")
+        return body
+    raise QueryError(f"no mapper answered on {keys.map_rooms} within {timeout:.0f} s")
+
+
+def format_rooms(body: dict[str, Any]) -> str:
+    """The rooms and doors as two fixed-width tables."""
+    rooms, doors = body["rooms"], body["doors"]
+    lines = [f"{_count(len(rooms), 'room')}, {_count(len(doors), 'door')} (frame map)"]
+    if rooms:
+        lines.append(f"{'id':>4} {'area':>7} {'cx':>8} {'cy':>8} {'closed':>6}  walls / doors")
+    for r in rooms:
+        cx, cy = r["centroid"]
+        closed = "yes" if r["closed"] else "no"
+        lines.append(
+            f"{r['id']:>4} {r['area']:>7.2f} {cx:>8.3f} {cy:>8.3f} {closed:>6}  "
+            f"{','.join(map(str, r['walls'])) or '-'} / {','.join(map(str, r['doors'])) or '-'}"
+        )
+    if doors:
+        lines.append(f"{'door':>4} {'width':>7} {'cx':>8} {'cy':>8} {'wall':>6}  rooms")
+    for d in doors:
+        cx, cy = d["center"]
+        joined = " - ".join(map(str, d["rooms"])) if len(d["rooms"]) > 1 else f"{d['rooms'][0]} - ?"
+        lines.append(
+            f"{d['id']:>4} {d['width']:>7.2f} {cx:>8.3f} {cy:>8.3f} {d['wall']:>6}  {joined}"
+        )
+    return "\n".join(lines)

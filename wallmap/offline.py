@@ -22,6 +22,7 @@ from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.common.se2 import transform_points
 from wallmap.config import Config, with_odometry_poses
 from wallmap.services.mapper import serving
+from wallmap.services.mapper.room_map import RoomsReply
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Pipeline
 from wallmap.services.player.bag_contents import LASERSCAN
@@ -112,6 +113,12 @@ def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[flo
         for frame, _ in recording.frames(how):
             scan = select_scan(frame.points, frame.T_base_sensor, how, frame.band is not None)
             yield frame.stamp, scan[np.isfinite(scan).all(axis=1)]
+
+
+def rooms(pipeline: Pipeline) -> RoomsReply:
+    """The rooms and doors of a pipeline's map as it stands, as the mapper serves them."""
+    wall_map = pipeline.map
+    return pipeline.mapping.rooms.update(serving.reply(wall_map).walls, wall_map.stamp)
 
 
 def walls(wall_map: WallMap, min_obs: int = 1) -> tuple[WallRecord, ...]:

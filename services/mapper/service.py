@@ -42,6 +42,7 @@ from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferCo
 from wallmap.services.mapper.pose_correction import PoseCorrector, SlamConfig
 from wallmap.services.mapper.pose_input import PoseInput, make_pose_input
 from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
+from wallmap.services.mapper.rooms_server import RoomsServer
 from wallmap.services.mapper.ros2_out import Ros2Outlet
 from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Mapping
@@ -216,9 +217,11 @@ def run(
             _missed(stats, "observations"),
         )  # fmt: skip
         queryable = session.declare_queryable(keys.map_walls)
+        rooms = RoomsServer(session, keys, core.lock, core.mapping, stats)
         workers = [
             threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
             threading.Thread(target=_updates, args=(core, updates, stop, ros2), daemon=True),
+            *rooms.workers(stop),
         ]
         for worker in workers:
             worker.start()
@@ -228,7 +231,7 @@ def run(
             _save(core, mapper.state, config)
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
-        for entity in (poses, observations, queryable, *([ros2] if ros2 else [])):
+        for entity in (poses, observations, queryable, rooms, *([ros2] if ros2 else [])):
             entity.undeclare()
         for worker in (poses, observations, *workers):
             worker.join(timeout=5.0)
@@ -262,6 +265,13 @@ def _restore(mapper: MapperSettings, stats: Stats, log: logging.Logger) -> Mappe
         judge=mapper.judge, wall_map=wall_map, corrector=corrector, judged=judge,
         poses=PoseBuffer(mapper.poses),
     )  # fmt: skip
+    saved_rooms = state_file.load_entry(mapper.state, "rooms") if mapper.state else None
+    if saved_rooms is not None:
+        try:
+            mapping.rooms.restore(saved_rooms)
+        except ValueError as err:
+            msg = f"state file {mapper.state} has an unusable 'rooms' entry ({err}); move it away"
+            raise state_file.StateError(msg) from err
     return MapperCore(mapping, stats, runs)
 
 
@@ -341,7 +351,8 @@ def _save(core: MapperCore, path: Path | None, config: dict[str, Any] | None) ->
         slam = core.corrector.to_json() if core.corrector is not None else None
         poses = core.judge.to_json() if core.judge is not None else None
         runs = core.progress.runs.values()
-        document = state_file.to_json(core.map, runs, slam, config, poses)
+        rooms = core.mapping.rooms.to_json()
+        document = state_file.to_json(core.map, runs, slam, config, poses, rooms)
         core.dirty = False
     state_file.write(path, document)
 

@@ -35,13 +35,15 @@ def to_json(
     slam: dict[str, Any] | None = None,
     config: dict[str, Any] | None = None,
     poses: dict[str, Any] | None = None,
+    rooms: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything needed to carry on where the map stopped.
 
     ``runs`` are the players' runs as far as this map has taken them: a mapper restarted on the
     file acknowledges them from there, and the players send it the rest again. ``slam``: the
     pose correction's state (``PoseCorrector.to_json``) under ``--slam``. ``poses``: what the
-    pose judge found of its source (``PoseJudge.to_json``). ``config``: the
+    pose judge found of its source (``PoseJudge.to_json``). ``rooms``: the floor seen and the
+    rooms' ids (``RoomMap.to_json``). ``config``: the
     configuration the map was made with (plain values, as ``wallmap config`` prints it); kept
     for people and scripts, not read back.
     """
@@ -49,6 +51,7 @@ def to_json(
         "config": config,
         "slam": slam,
         "poses": poses,
+        "rooms": rooms,
         "v": STATE_VERSION,
         "runs": [[r.run, r.processed, r.integrated, r.dropped] for r in runs],
         "next_id": wall_map.next_id,

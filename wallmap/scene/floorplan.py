@@ -83,13 +83,37 @@ class Furniture:
 
 
 @dataclass(frozen=True)
+class Room:
+    """A room's floor outline, counter-clockwise: the truth rooms are scored against."""
+
+    id: int
+    polygon: tuple[Point, ...]
+
+
+@dataclass(frozen=True)
+class Door:
+    """A doorway: its span from jamb to jamb, and the rooms (ids) it joins."""
+
+    id: int
+    p0: Point
+    p1: Point
+    rooms: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class FloorPlan:
-    """Walls and furniture of one building level, plus a collision-free route through it."""
+    """Walls and furniture of one building level, plus a collision-free route through it.
+
+    ``rooms`` and ``doors`` are the plan's truth where its generator knows them (a strip of
+    rooms); empty otherwise.
+    """
 
     walls: tuple[Wall, ...]
     furniture: tuple[Furniture, ...] = ()
     ceiling_height: float = 2.6
     route: tuple[Point, ...] = ()
+    rooms: tuple[Room, ...] = ()
+    doors: tuple[Door, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form for ground-truth files."""
@@ -117,6 +141,11 @@ class FloorPlan:
                 for f in self.furniture
             ],
             "route": [list(p) for p in self.route],
+            "rooms": [{"id": r.id, "polygon": [list(p) for p in r.polygon]} for r in self.rooms],
+            "doors": [
+                {"id": d.id, "p0": list(d.p0), "p1": list(d.p1), "rooms": list(d.rooms)}
+                for d in self.doors
+            ],
         }
 
     @classmethod
@@ -149,6 +178,14 @@ class FloorPlan:
             ),
             ceiling_height=float(data["ceiling_height"]),
             route=tuple(_point(p) for p in data.get("route", ())),
+            rooms=tuple(
+                Room(int(r["id"]), tuple(_point(p) for p in r["polygon"]))
+                for r in data.get("rooms", ())
+            ),
+            doors=tuple(
+                Door(int(d["id"]), _point(d["p0"]), _point(d["p1"]), tuple(map(int, d["rooms"])))
+                for d in data.get("doors", ())
+            ),
         )
 
 
@@ -217,6 +254,28 @@ def clearance(plan: FloorPlan, points: np.ndarray) -> np.ndarray:
     for box in plan.furniture:
         result[_inside_box(points, box)] = 0.0
     return result
+
+
+def free_rays(plan: FloorPlan, at: np.ndarray, n: int = 90, reach: float = 6.0) -> np.ndarray:
+    """Where ``n`` rays from ``at``, all round, end on walls that return depth (not glass).
+
+    Relative to ``at``; a ray meeting nothing within ``reach`` (m) is left out, as a sensor
+    reports no return. The free floor a robot at ``at`` sees, for tests of the room finder.
+    """
+    solid = [w for w in plan.walls if not w.glass]
+    a = np.array([w.p0 for w in solid])
+    e = np.array([w.p1 for w in solid]) - a
+    ends = []
+    for angle in np.linspace(-np.pi, np.pi, n, endpoint=False):
+        d = np.array([np.cos(angle), np.sin(angle)])
+        denom = d[0] * e[:, 1] - d[1] * e[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = ((a[:, 0] - at[0]) * e[:, 1] - (a[:, 1] - at[1]) * e[:, 0]) / denom
+            u = ((a[:, 0] - at[0]) * d[1] - (a[:, 1] - at[1]) * d[0]) / denom
+        hit = (s > 0) & (u >= 0) & (u <= 1) & (s <= reach)
+        if hit.any():
+            ends.append(s[hit].min() * d)
+    return np.array(ends).reshape(-1, 2)
 
 
 def smooth_route(route: Sequence[Point], iterations: int = 7) -> np.ndarray:
@@ -418,6 +477,18 @@ def _try_plan(
         furniture=tuple(furniture),
         ceiling_height=ceiling,
         route=strip.route,
+        rooms=tuple(
+            Room(r, tuple(_point(p) for p in [*right[r], *left[r][::-1]])) for r in range(n_rooms)
+        ),
+        doors=tuple(
+            Door(
+                b - 1,
+                _point(centers[b] - door_w[b] / 2 * along[b]),
+                _point(centers[b] + door_w[b] / 2 * along[b]),
+                (b - 1, b),
+            )
+            for b in range(1, n_rooms)
+        ),
     )
 
 
@@ -664,6 +735,8 @@ def _transform_plan(plan: FloorPlan, angle: float, origin: np.ndarray) -> FloorP
         ),
         ceiling_height=plan.ceiling_height,
         route=tuple(move(p) for p in plan.route),
+        rooms=tuple(Room(r.id, tuple(move(p) for p in r.polygon)) for r in plan.rooms),
+        doors=tuple(Door(d.id, move(d.p0), move(d.p1), d.rooms) for d in plan.doors),
     )
 
 
@@ -762,7 +835,9 @@ def with_counters(plan: FloorPlan, seed: int, counters: int = 3) -> FloorPlan:
                 height = COUNTER_HEIGHT + float(rng.uniform(0.2, 0.45))
                 furniture.append(Furniture(_point(centre), size, yaw, height, COUNTER_HEIGHT))
             break
-    return FloorPlan(plan.walls, tuple(furniture), plan.ceiling_height, plan.route)
+    return FloorPlan(
+        plan.walls, tuple(furniture), plan.ceiling_height, plan.route, plan.rooms, plan.doors
+    )
 
 
 WINDOW = (2.0, 0.8, 2.3)  # m: width, bottom and top of a window pane (across the whole band)
@@ -785,7 +860,9 @@ def with_windows(plan: FloorPlan, seed: int, windows: int = 3) -> FloorPlan:
             start = float(rng.uniform(1.0, wall.length - width - 1.0))
             pane = ((start, start + width, bottom, top),)
         walls.append(Wall(wall.id, wall.p0, wall.p1, wall.glass, wall.height, pane))
-    return FloorPlan(tuple(walls), plan.furniture, plan.ceiling_height, plan.route)
+    return FloorPlan(
+        tuple(walls), plan.furniture, plan.ceiling_height, plan.route, plan.rooms, plan.doors
+    )
 
 
 def junction_plan(seed: int) -> FloorPlan:

@@ -1,0 +1,127 @@
+"""The floor the sensor saw as free: a grid counting the rays and the robot's passes over it.
+
+Rooms are regions of seen floor bounded by walls and doors (``common.rooms``); the walls come
+from the map, the floor from here. Every frame's free rays (``Observations.rays``: from the
+sensor to where rays in the height band ended) cross free floor up to a little before their
+end, and the robot stands on free floor wherever it is. A cell counts as free once
+``MIN_FREE`` rays or passes crossed it: one stray return through a crack does not make a room.
+
+The grid grows as the map does (a building is not known in advance) and saturates its counts
+at 255. Pure numpy, no Zenoh, so the mapper and the offline runner share it.
+"""
+
+from __future__ import annotations
+
+import base64
+import zlib
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common import se2
+
+Array = NDArray[np.float64]
+
+CELL = 0.1  # m
+MIN_FREE = 2  # rays or passes over a cell before it is free floor
+RAY_SHORT = 0.2  # m: a ray's last stretch is not counted (it ends on the wall, or near it)
+ROBOT_RADIUS = 0.2  # m of floor around the sensor that the robot stands on
+GROW = 64  # cells added on a side when the grid grows (amortises the copies)
+
+
+class FreeSpace:
+    """Counts per ``cell`` over a growing grid in the map frame; cell (i, j) is x then y."""
+
+    def __init__(self, cell: float = CELL) -> None:
+        self.cell = cell
+        self.origin = np.zeros(2, dtype=np.int64)  # cell index of counts[0, 0]
+        self.counts = np.zeros((0, 0), dtype=np.uint8)
+
+    def add_rays(self, pose: Array, origin: Array, ends: Array) -> None:
+        """A frame's free rays, in the robot frame at ``pose`` (x, y, yaw).
+
+        The sensor is at ``origin``; the rays end at ``ends`` (n, 2).
+        """
+        rot = se2.rotation(float(pose[2]))
+        start = pose[:2] + rot @ np.asarray(origin, dtype=float)
+        stops = pose[:2] + np.asarray(ends, dtype=float).reshape(-1, 2) @ rot.T
+        rays = stops - start
+        length = np.linalg.norm(rays, axis=1)
+        usable = length - RAY_SHORT
+        keep = usable > 0
+        if not keep.any():
+            self.add_points(self._disc(start))
+            return
+        rays, length, usable = rays[keep], length[keep], usable[keep]
+        step = 0.5 * self.cell
+        count = np.ceil(usable / step).astype(np.int64) + 1
+        along = np.arange(int(count.max()))[None, :] * step  # (1, k) metres from the sensor
+        inside = along <= usable[:, None]
+        unit = rays / length[:, None]
+        points = start + along[..., None] * unit[:, None, :]
+        self.add_points(np.concatenate([points[inside], self._disc(start)]))
+
+    def add_robot(self, position: Array) -> None:
+        """The floor the robot stands on at ``position`` (x, y)."""
+        self.add_points(self._disc(np.asarray(position, dtype=float)))
+
+    def _disc(self, centre: Array) -> Array:
+        span = np.arange(-ROBOT_RADIUS, ROBOT_RADIUS + 1e-9, 0.5 * self.cell)
+        grid = np.stack(np.meshgrid(span, span), axis=-1).reshape(-1, 2)
+        return centre + grid[np.hypot(grid[:, 0], grid[:, 1]) <= ROBOT_RADIUS]
+
+    def add_points(self, points: Array) -> None:
+        """One count per cell that any of ``points`` (n, 2) falls in (a ray counts once)."""
+        if not len(points):
+            return
+        cells = np.floor(points / self.cell).astype(np.int64)
+        self._cover(cells.min(axis=0), cells.max(axis=0))
+        i, j = (cells - self.origin).T
+        # A cell named twice is written twice with the same value: it still counts once.
+        self.counts[i, j] = np.minimum(self.counts[i, j], 254) + 1
+
+    def _cover(self, low: NDArray[np.int64], high: NDArray[np.int64]) -> None:
+        """Grow the grid (by ``GROW`` cells a side at least) to hold cells ``low``..``high``."""
+        shape = np.array(self.counts.shape, dtype=np.int64)
+        if self.counts.size and (low >= self.origin).all() and (high < self.origin + shape).all():
+            return
+        if not self.counts.size:
+            new_low, new_high = low - GROW, high + GROW
+        else:
+            new_low = np.where(low < self.origin, low - GROW, self.origin)
+            new_high = np.where(high >= self.origin + shape, high + GROW, self.origin + shape - 1)
+        grown = np.zeros(tuple(new_high - new_low + 1), dtype=np.uint8)
+        if self.counts.size:
+            at = self.origin - new_low
+            grown[at[0] : at[0] + shape[0], at[1] : at[1] + shape[1]] = self.counts
+        self.origin, self.counts = new_low, grown
+
+    def free(self) -> NDArray[np.bool_]:
+        """Cells seen free (``MIN_FREE`` counts), over ``counts``' grid."""
+        return self.counts >= MIN_FREE
+
+    def to_json(self) -> dict[str, Any]:
+        """The grid for a state file: counts compressed (a floor is mostly runs of equal counts)."""
+        packed = base64.b64encode(zlib.compress(self.counts.tobytes(), 6)).decode("ascii")
+        return {
+            "cell": self.cell,
+            "origin": self.origin.tolist(),
+            "shape": list(self.counts.shape),
+            "counts": packed,
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> FreeSpace:
+        """Inverse of ``to_json``; ValueError says what is wrong."""
+        try:
+            space = cls(float(data["cell"]))
+            shape = tuple(int(n) for n in data["shape"])
+            raw = zlib.decompress(base64.b64decode(data["counts"]))
+            counts = np.frombuffer(raw, dtype=np.uint8).reshape(shape).copy()
+            origin = np.asarray(data["origin"], dtype=np.int64).reshape(2)
+        except (KeyError, TypeError, ValueError, zlib.error) as err:
+            msg = f"free space: {err}"
+            raise ValueError(msg) from err
+        space.origin, space.counts = origin, counts
+        return space

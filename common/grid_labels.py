@@ -1,0 +1,212 @@
+"""Regions of a boolean grid: connected components, outlines as polygons, simplification.
+
+What room segmentation needs of image processing, in numpy and a little Python: the mapper
+carries no image library. Components are found on runs of cells (a row's stretches of True),
+joined where runs of neighbouring rows overlap (4-connectivity), so the Python work grows with
+the number of runs, a few thousand for a building, not with the cells.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+Mask = NDArray[np.bool_]
+
+
+def _runs(mask: Mask) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Each row's stretches of True: row, first column, column past the last; row-major."""
+    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
+    padded[:, 1:-1] = mask
+    step = np.diff(padded, axis=1)
+    rows, starts = np.nonzero(step == 1)
+    _, ends = np.nonzero(step == -1)
+    return rows, starts, ends
+
+
+def _find(parent: list[int], i: int) -> int:
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+def label(mask: Mask) -> tuple[NDArray[np.int32], int]:
+    """4-connected components of ``mask``: labels 0..n-1 (-1 outside ``mask``), and n."""
+    labels = np.full(mask.shape, -1, dtype=np.int32)
+    rows, starts, ends = _runs(mask)
+    if not len(rows):
+        return labels, 0
+    parent = list(range(len(rows)))
+    first = np.searchsorted(rows, np.arange(mask.shape[0] + 1))  # runs of row r: first[r]..
+    for r in range(mask.shape[0] - 1):
+        a0, a1, b0, b1 = first[r], first[r + 1], first[r + 1], first[r + 2]
+        if a0 == a1 or b0 == b1:
+            continue
+        a_starts, a_ends = starts[a0:a1], ends[a0:a1]
+        # Runs of the next row overlapping run a: they start before a ends and end after a starts.
+        lo = np.searchsorted(ends[b0:b1], a_starts, side="right")
+        hi = np.searchsorted(starts[b0:b1], a_ends, side="left")
+        for k in np.nonzero(hi > lo)[0].tolist():
+            ra = _find(parent, a0 + k)
+            for b in range(b0 + int(lo[k]), b0 + int(hi[k])):
+                rb = _find(parent, b)
+                if ra != rb:
+                    parent[rb] = ra
+    roots = np.array([_find(parent, i) for i in range(len(rows))])
+    _, run_label = np.unique(roots, return_inverse=True)
+    lengths = ends - starts
+    cell_rows = np.repeat(rows, lengths)
+    cell_cols = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
+    labels[cell_rows, cell_cols] = np.repeat(run_label, lengths)
+    return labels, int(run_label.max()) + 1
+
+
+def touches_border(labels: NDArray[np.int32], n: int) -> NDArray[np.bool_]:
+    """Per label, whether it reaches the grid's edge (open to what lies beyond the grid)."""
+    edge = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    out = np.zeros(n, dtype=bool)
+    out[edge[edge >= 0]] = True
+    return out
+
+
+def outline(mask: Mask) -> Array:
+    """The outer boundary of ``mask``'s cells, counter-clockwise, in cell units (corners).
+
+    Cell (i, j) spans [i, i+1] x [j, j+1]. Boundary edges are chained with the region on their
+    left; where two loops touch at a corner the sharper left turn is taken, so loops stay apart.
+    Of the loops, the one of largest area is the outer boundary (holes run clockwise).
+    """
+    m = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), dtype=bool)
+    m[1:-1, 1:-1] = mask
+    nxt: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    # x = i (rows), y = j (columns); region on the left of each directed edge.
+    i, j = np.nonzero(m[1:, :] & ~m[:-1, :])  # cell (i+1, j) in, (i, j) out: edge at x = i+1
+    _edges(nxt, i + 1, j + 1, i + 1, j, -1)
+    i, j = np.nonzero(m[:-1, :] & ~m[1:, :])  # cell (i, j) in, (i+1, j) out: edge at x = i+1
+    _edges(nxt, i + 1, j, i + 1, j + 1, -1)
+    i, j = np.nonzero(m[:, 1:] & ~m[:, :-1])  # cell (i, j+1) in, (i, j) out: edge at y = j+1
+    _edges(nxt, i, j + 1, i + 1, j + 1, -1)
+    i, j = np.nonzero(m[:, :-1] & ~m[:, 1:])  # cell (i, j) in, (i, j+1) out: edge at y = j+1
+    _edges(nxt, i + 1, j + 1, i, j + 1, -1)
+    best, best_area = np.zeros((0, 2)), 0.0
+    while nxt:
+        loop = _walk(nxt)
+        area = polygon_area(loop)
+        if area > best_area:
+            best, best_area = loop, area
+    return best
+
+
+def _edges(
+    nxt: dict[tuple[int, int], list[tuple[int, int]]],
+    x0: NDArray[np.int64],
+    y0: NDArray[np.int64],
+    x1: NDArray[np.int64],
+    y1: NDArray[np.int64],
+    shift: int,
+) -> None:
+    """Directed edges (x0, y0) -> (x1, y1) in padded corner units, shifted back by ``shift``."""
+    for a, b, c, d in zip(
+        (x0 + shift).tolist(),
+        (y0 + shift).tolist(),
+        (x1 + shift).tolist(),
+        (y1 + shift).tolist(),
+        strict=True,
+    ):
+        nxt.setdefault((a, b), []).append((c, d))
+
+
+def _walk(nxt: dict[tuple[int, int], list[tuple[int, int]]]) -> Array:
+    """One closed loop of edges, removed from ``nxt``."""
+    start = next(iter(nxt))
+    points = [start]
+    here, came = start, None
+    while True:
+        options = nxt[here]
+        if len(options) > 1 and came is not None:
+            dx, dy = here[0] - came[0], here[1] - came[1]
+            # The left turn first: (-dy, dx) is the incoming direction turned left.
+            options.sort(key=lambda p: (p[0] - here[0]) * -dy + (p[1] - here[1]) * dx, reverse=True)
+        going = options.pop(0)
+        if not options:
+            del nxt[here]
+        came, here = here, going
+        if here == start:
+            break
+        points.append(here)
+    return np.asarray(points, dtype=float)
+
+
+def polygon_area(points: Array) -> float:
+    """Signed area (shoelace): positive for a counter-clockwise polygon."""
+    if len(points) < 3:
+        return 0.0
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def polygon_centroid(points: Array) -> Array:
+    """The centroid of a simple polygon's area."""
+    x, y = points[:, 0], points[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    area = 0.5 * cross.sum()
+    if abs(area) < 1e-12:
+        return points.mean(axis=0)
+    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+
+
+def simplify(points: Array, tolerance: float) -> Array:
+    """A closed polygon with vertices dropped while it stays within ``tolerance`` (Douglas-Peucker).
+
+    Split at a vertex sure to stay (the farthest from the mean: a corner of the convex hull)
+    and the vertex farthest from it, each half simplified as an open chain.
+    """
+    if len(points) < 4:
+        return points
+    points = np.roll(
+        points, -int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1))), axis=0
+    )
+    far = int(np.argmax(np.linalg.norm(points - points[0], axis=1)))
+    closed = np.vstack([points, points[:1]])
+    first = _chain(closed[: far + 1], tolerance)
+    second = _chain(closed[far:], tolerance)
+    return np.vstack([first[:-1], second[:-1]])
+
+
+def _chain(points: Array, tolerance: float) -> Array:
+    """Douglas-Peucker on an open chain, iteratively (no recursion limit on long outlines)."""
+    keep = np.zeros(len(points), dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(points) - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b <= a + 1:
+            continue
+        seg = points[b] - points[a]
+        rel = points[a + 1 : b] - points[a]
+        norm = float(np.hypot(*seg))
+        if norm < 1e-12:
+            dist = np.hypot(rel[:, 0], rel[:, 1])
+        else:
+            dist = np.abs(rel[:, 0] * seg[1] - rel[:, 1] * seg[0]) / norm
+        k = int(np.argmax(dist))
+        if dist[k] > tolerance:
+            mid = a + 1 + k
+            keep[mid] = True
+            stack += [(a, mid), (mid, b)]
+    return points[keep]
+
+
+def inside_polygon(points: Array, polygon: Array) -> NDArray[np.bool_]:
+    """Whether each of ``points`` (n, 2) lies inside ``polygon`` (even-odd rule)."""
+    inside = np.zeros(len(points), dtype=bool)
+    x, y = points[:, 0], points[:, 1]
+    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        crosses = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        inside ^= crosses & (x < at)
+    return inside

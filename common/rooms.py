@@ -1,0 +1,379 @@
+"""Rooms and the doors between them, from the wall map and the floor the sensor saw free.
+
+A room is a region of seen floor bounded by walls and doors; a corridor is a room. The method,
+on a grid of ``FreeSpace``'s cells:
+
+1. **Openings.** Every end of a wall's segment that stops short of the next wall (or of the
+   next segment of its own wall) leaves an opening: the shortest span from that end, roughly
+   along its wall (``door_angle``), to another wall's end or face, at most ``door_max`` long.
+   Spans under ``door_min`` are gaps in the masonry (a corner not quite seen): closed as wall.
+   Longer ones are door candidates, and closed too while the floor is divided.
+2. **Regions.** Walls and openings drawn as barriers (``barrier`` thick), the rest of the grid
+   split into 4-connected regions. A region that does not reach the grid's edge is enclosed:
+   it is a room, ``closed``, and its floor is all of it (corners the sensor never saw
+   included). A region reaching the edge leaks to unexplored space: its seen floor, in
+   connected pieces, makes rooms that are not closed. Pieces under ``min_area`` are dropped.
+3. **Doors.** A door candidate is a door when the robot or its rays crossed it (its cells
+   are seen free) and it joins two different rooms, or a room and unexplored space. One
+   never seen through (glass, a dark niche) stays wall; one with the same room both sides is
+   not a door.
+
+Each room is then its cells grown back into the barrier they face (a barrier's half thickness),
+outlined, simplified (``simplify``). Pure numpy: no Zenoh, so the mapper, the offline runner
+and the benchmarks share it. Ids are not given here (``common.room_ids``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common.free_space import FreeSpace
+from wallmap.common.grid_labels import (
+    label,
+    outline,
+    polygon_area,
+    polygon_centroid,
+    simplify,
+    touches_border,
+)
+
+Array = NDArray[np.float64]
+PAD = 8  # cells of grid kept around everything known
+
+
+@dataclass(frozen=True)
+class RoomsConfig:
+    """How rooms are told apart.
+
+    Attributes:
+        door_min: narrowest door (m); narrower openings are gaps in the wall.
+        door_max: widest door (m).
+        door_angle: how far (deg) an opening's direction may turn from its wall's.
+        joint: an end this near (m) another wall is joined to it (a corner, a T): no opening.
+        barrier: half thickness (m) of walls and openings while the floor is divided.
+        min_area: smallest room (m^2).
+        simplify: how far (m) an outline may stray from its cells.
+    """
+
+    door_min: float = 0.6
+    door_max: float = 2.5
+    door_angle: float = 35.0
+    joint: float = 0.2
+    barrier: float = 0.1
+    min_area: float = 1.0
+    simplify: float = 0.12
+
+
+@dataclass(frozen=True)
+class WallSegments:
+    """One wall of the map: its id and its segments (k, 2, 2), in the map frame."""
+
+    id: int
+    segments: Array
+
+
+@dataclass(frozen=True)
+class Opening:
+    """A span from one wall's end to another wall (or piece of its own), in the map frame."""
+
+    wall: int
+    p0: Array
+    p1: Array
+
+    @property
+    def width(self) -> float:
+        """Its length (m)."""
+        return float(np.hypot(*(self.p1 - self.p0)))
+
+
+@dataclass
+class RoomShape:
+    """A room found, before it has an id: its outline and what bounds it.
+
+    ``cells``: its grid cells as global (i, j) indices of ``FreeSpace``'s cell size.
+    """
+
+    polygon: Array
+    area: float
+    centroid: Array
+    closed: bool
+    cells: NDArray[np.int64]
+    walls: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class DoorShape:
+    """A door found, before it has an id: its span, its wall, and the rooms (indices) it joins."""
+
+    p0: Array
+    p1: Array
+    wall: int
+    rooms: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The rooms and doors of one segmentation."""
+
+    rooms: list[RoomShape]
+    doors: list[DoorShape]
+
+
+def openings(walls: Sequence[WallSegments], config: RoomsConfig) -> list[Opening]:
+    """Every segment end's opening to the nearest wall roughly along its own wall (step 1)."""
+    pieces = [
+        (w.id, s) for w in walls for s in np.asarray(w.segments, dtype=float).reshape(-1, 2, 2)
+    ]
+    if len(pieces) < 2:
+        return []
+    a = np.array([s[0] for _, s in pieces])
+    b = np.array([s[1] for _, s in pieces])
+    cos_max = math.cos(math.radians(config.door_angle))
+    found: dict[tuple[float, ...], Opening] = {}
+    for k, (wall, seg) in enumerate(pieces):
+        for end, other in ((seg[0], seg[1]), (seg[1], seg[0])):
+            outward = end - other
+            norm = float(np.hypot(*outward))
+            if norm < 1e-9:
+                continue
+            if _distance_to_others(end, a, b, k) < config.joint:
+                continue  # joined to another wall: the wall goes on there
+            target = _nearest_ahead(end, outward / norm, a, b, k, config.door_max, cos_max)
+            if target is None or _crosses_walls(end, target, a, b, k):
+                continue
+            key = tuple(np.round(np.concatenate(sorted([end, target], key=tuple)), 2).tolist())
+            found.setdefault(key, Opening(wall, end.copy(), target))
+    return list(found.values())
+
+
+def _distance_to_others(point: Array, a: Array, b: Array, own: int) -> float:
+    """Distance from ``point`` to the nearest segment a-b other than ``own``."""
+    seg = b - a
+    t = np.clip(((point - a) * seg).sum(axis=1) / np.maximum((seg**2).sum(axis=1), 1e-12), 0, 1)
+    dist = np.hypot(*(a + t[:, None] * seg - point).T)
+    dist[own] = np.inf
+    return float(dist.min())
+
+
+def _nearest_ahead(
+    end: Array, direction: Array, a: Array, b: Array, own: int, reach: float, cos_max: float
+) -> Array | None:
+    """The nearest point of another segment (its ends, or the foot on it) ahead of ``end``."""
+    seg = b - a
+    length2 = np.maximum((seg**2).sum(axis=1), 1e-12)
+    t = np.clip(((end - a) * seg).sum(axis=1) / length2, 0.0, 1.0)
+    feet = a + t[:, None] * seg
+    points = np.concatenate([a, b, feet])
+    owner = np.tile(np.arange(len(a)), 3)
+    rel = points - end
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cosine = (rel @ direction) / dist
+    ok = (owner != own) & (dist > 1e-6) & (dist <= reach) & (cosine >= cos_max)
+    if not ok.any():
+        return None
+    return points[np.flatnonzero(ok)[np.argmin(dist[ok])]]
+
+
+def _crosses_walls(p: Array, q: Array, a: Array, b: Array, own: int) -> bool:
+    """Whether the span p-q passes through a segment other than ``own`` (ends touching aside)."""
+    d = q - p
+    e = b - a
+    denom = d[0] * e[:, 1] - d[1] * e[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = ((a[:, 0] - p[0]) * e[:, 1] - (a[:, 1] - p[1]) * e[:, 0]) / denom
+        u = ((a[:, 0] - p[0]) * d[1] - (a[:, 1] - p[1]) * d[0]) / denom
+    inner = (s > 0.02) & (s < 0.98) & (u > 0.02) & (u < 0.98)
+    inner[own] = False
+    return bool(inner.any())
+
+
+class _Grid:
+    """The cells over everything known: global index (i, j) -> local [i - i0, j - j0]."""
+
+    def __init__(self, free: FreeSpace, walls: Sequence[WallSegments]) -> None:
+        self.cell = free.cell
+        ends = [np.asarray(w.segments, dtype=float).reshape(-1, 2) for w in walls]
+        low = np.array(free.origin, dtype=np.int64)
+        high = low + np.array(free.counts.shape, dtype=np.int64) - 1
+        if ends and sum(len(e) for e in ends):
+            points = np.floor(np.concatenate(ends) / self.cell).astype(np.int64)
+            low = np.minimum(low, points.min(axis=0)) if free.counts.size else points.min(axis=0)
+            high = np.maximum(high, points.max(axis=0)) if free.counts.size else points.max(axis=0)
+        self.origin = low - PAD
+        self.shape = tuple((high - low + 1 + 2 * PAD).tolist())
+        self.free = np.zeros(self.shape, dtype=bool)
+        if free.counts.size:
+            at = free.origin - self.origin
+            seen = free.free()
+            self.free[at[0] : at[0] + seen.shape[0], at[1] : at[1] + seen.shape[1]] = seen
+
+    def centres(self, i: NDArray[np.int64], j: NDArray[np.int64]) -> Array:
+        """Map-frame centres of local cells."""
+        return (np.stack([i, j], axis=-1) + self.origin + 0.5) * self.cell
+
+    def local(
+        self, points: Array
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+        """Local cell indices of map points, and whether they fall on the grid."""
+        idx = np.floor(np.asarray(points) / self.cell).astype(np.int64) - self.origin
+        ok = (idx >= 0).all(axis=-1) & (idx < np.array(self.shape)).all(axis=-1)
+        return idx[..., 0].clip(0, self.shape[0] - 1), idx[..., 1].clip(0, self.shape[1] - 1), ok
+
+    def draw(self, mask: NDArray[np.bool_], p: Array, q: Array, radius: float) -> None:
+        """Mark the cells whose centres lie within ``radius`` of segment p-q."""
+        lo = np.floor((np.minimum(p, q) - radius) / self.cell).astype(np.int64) - self.origin
+        hi = np.floor((np.maximum(p, q) + radius) / self.cell).astype(np.int64) - self.origin
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, np.array(self.shape) - 1)
+        if (hi < lo).any():
+            return
+        ii, jj = np.meshgrid(
+            np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"
+        )
+        c = self.centres(ii, jj)
+        seg = q - p
+        t = np.clip(((c - p) @ seg) / max(float(seg @ seg), 1e-12), 0.0, 1.0)
+        near = np.hypot(*(c - (p + t[..., None] * seg)).transpose(2, 0, 1)) <= radius
+        mask[ii[near], jj[near]] = True
+
+
+def find_rooms(
+    walls: Sequence[WallSegments], free: FreeSpace, config: RoomsConfig | None = None
+) -> Layout:
+    """Rooms and doors of the map's walls and the seen floor (steps 1-3 of the module's doc)."""
+    config = config or RoomsConfig()
+    grid = _Grid(free, walls)
+    if not grid.free.any():
+        return Layout([], [])
+    radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
+    barrier = np.zeros(grid.shape, dtype=bool)
+    for wall in walls:
+        for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
+            grid.draw(barrier, p, q, radius)
+    spans = [o for o in openings(walls, config) if o.width > 0]
+    for span in spans:
+        grid.draw(barrier, span.p0, span.p1, radius)
+    labels, rooms = _regions(grid, barrier, config)
+    _grow(labels, barrier, math.ceil(radius / grid.cell))
+    shapes = [_shape(grid, labels == k, closed, config) for k, closed in enumerate(rooms)]
+    _bounding_walls(grid, labels, walls, shapes, radius)
+    doors = [
+        door
+        for span in spans
+        if span.width >= config.door_min and (door := _door(grid, labels, span, radius)) is not None
+    ]
+    return Layout(shapes, doors)
+
+
+def _regions(
+    grid: _Grid, barrier: NDArray[np.bool_], config: RoomsConfig
+) -> tuple[NDArray[np.int32], list[bool]]:
+    """Room labels per cell (-1: none) and whether each room is closed (step 2)."""
+    regions, n = label(~barrier)
+    leaky = touches_border(regions, n)
+    min_cells = config.min_area / grid.cell**2
+    seen = np.bincount(regions[grid.free & (regions >= 0)], minlength=n)
+    labels = np.full(grid.shape, -1, dtype=np.int32)
+    closed: list[bool] = []
+    for k in np.flatnonzero((seen >= min_cells) & ~leaky).tolist():
+        labels[regions == k] = len(closed)
+        closed.append(True)
+    open_floor = grid.free & ~barrier & (regions >= 0) & leaky[regions.clip(0)]
+    pieces, m = label(open_floor)
+    sizes = np.bincount(pieces[pieces >= 0], minlength=m)
+    for k in np.flatnonzero(sizes >= min_cells).tolist():
+        labels[pieces == k] = len(closed)
+        closed.append(False)
+    return labels, closed
+
+
+def _grow(labels: NDArray[np.int32], barrier: NDArray[np.bool_], steps: int) -> None:
+    """Each room's cells grown ``steps`` cells into the barrier it faces (walls' half width)."""
+    for _ in range(steps):
+        for shift, axis in ((1, 0), (-1, 0), (1, 1), (-1, 1)):
+            moved = np.roll(labels, shift, axis=axis)
+            take = barrier & (labels < 0) & (moved >= 0)
+            labels[take] = moved[take]
+
+
+def _shape(grid: _Grid, cells: NDArray[np.bool_], closed: bool, config: RoomsConfig) -> RoomShape:
+    """A room's outline (map frame, counter-clockwise), area and centroid from its cells."""
+    corners = outline(cells)
+    polygon = simplify((corners + grid.origin) * grid.cell, config.simplify)
+    ii, jj = np.nonzero(cells)
+    return RoomShape(
+        polygon=polygon,
+        area=abs(polygon_area(polygon)),
+        centroid=polygon_centroid(polygon),
+        closed=closed,
+        cells=np.stack([ii, jj], axis=1) + grid.origin,
+    )
+
+
+def _bounding_walls(
+    grid: _Grid,
+    labels: NDArray[np.int32],
+    walls: Sequence[WallSegments],
+    shapes: list[RoomShape],
+    radius: float,
+) -> None:
+    """Each room's walls: those with a share of their length facing its cells."""
+    reach = radius + 1.5 * grid.cell
+    for wall in walls:
+        hits: dict[int, int] = {}
+        total = 0
+        for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
+            length = float(np.hypot(*(q - p)))
+            if length < 1e-9:
+                continue
+            normal = np.array([p[1] - q[1], q[0] - p[0]]) / length
+            t = np.linspace(0.1, 0.9, max(2, int(length / 0.2)))[:, None]
+            along = p + t * (q - p)
+            for side in (normal, -normal):
+                i, j, ok = grid.local(along + reach * side)
+                rooms = labels[i[ok], j[ok]]
+                for room in rooms[rooms >= 0].tolist():
+                    hits[room] = hits.get(room, 0) + 1
+            total += len(along)
+        for room, count in hits.items():
+            if count >= max(2, 0.2 * total):
+                shapes[room].walls.append(wall.id)
+
+
+def _door(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> DoorShape | None:
+    """The span as a door (step 3): seen through, and other rooms (or none) on its two sides."""
+    t = np.linspace(0.2, 0.8, 5)[:, None]
+    along = span.p0 + t * (span.p1 - span.p0)
+    i, j, ok = grid.local(along)
+    if not grid.free[i[ok], j[ok]].any() and not _free_near(grid, along):
+        return None  # never crossed: glass or a niche, wall for the rooms
+    d = span.p1 - span.p0
+    normal = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-12)
+    sides: list[int] = []
+    for side in (normal, -normal):
+        i, j, ok = grid.local(along + (radius + 2.5 * grid.cell) * side)
+        found = labels[i[ok], j[ok]]
+        found = found[found >= 0]
+        sides.append(int(np.bincount(found).argmax()) if len(found) else -1)
+    sides_dir = normal if sides[0] < 0 else -normal
+    if sides[0] == sides[1] or max(sides) < 0:
+        return None
+    if min(sides) < 0 and not _free_near(grid, along + (radius + 2.5 * grid.cell) * sides_dir):
+        return None  # towards no room, and nothing seen beyond it either: not an opening
+    rooms = tuple(sorted(s for s in sides if s >= 0))
+    return DoorShape(span.p0, span.p1, span.wall, rooms)
+
+
+def _free_near(grid: _Grid, points: Array) -> bool:
+    """Seen free floor within a cell of the points (the opening's own cells are barrier-drawn)."""
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            i, j, ok = grid.local(points + grid.cell * np.array([di, dj]))
+            if grid.free[i[ok], j[ok]].any():
+                return True
+    return False

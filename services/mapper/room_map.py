@@ -1,0 +1,256 @@
+"""The map's rooms and doors, kept current off the frame path, with ids that stay.
+
+Frames hand over their free rays and pose (``add_frame``: an append, nothing computed); an
+update (``update``, on the mapper's rooms worker, about once a second while the map grows)
+draws them into the ``FreeSpace`` grid and segments the floor anew (``common.rooms``) from the
+served walls. A segmentation does not know yesterday's ids, so each new room takes the id of
+the old room it overlaps most (most shared cells, at least ``KEEP_SHARE`` of the smaller), and
+each door the id of an old door within ``DOOR_REACH`` of its centre; the rest get new ids, never
+reused. The grid, the rooms' cells and the counters go into the state file, so a mapper
+restarted on it serves the same ids.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wallmap.common.free_space import FreeSpace
+from wallmap.common.map_records import WallRecord
+from wallmap.common.rooms import DoorShape, Layout, RoomsConfig, RoomShape, WallSegments, find_rooms
+
+Array = NDArray[np.float64]
+
+KEEP_SHARE = 0.3  # of the smaller room's cells shared with an old room: the same room
+DOOR_REACH = 0.5  # m between an old door's centre and a new one's: the same door
+
+
+@dataclass(frozen=True)
+class DoorRecord:
+    """A door as served (the contract's door record)."""
+
+    id: int
+    center: tuple[float, float]
+    width: float
+    p0: tuple[float, float]
+    p1: tuple[float, float]
+    wall: int
+    rooms: tuple[int, ...]
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "id": self.id, "center": list(self.center), "width": self.width,
+            "p0": list(self.p0), "p1": list(self.p1), "wall": self.wall, "rooms": list(self.rooms),
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RoomRecord:
+    """A room as served (the contract's room record)."""
+
+    id: int
+    polygon: tuple[tuple[float, float], ...]
+    area: float
+    centroid: tuple[float, float]
+    walls: tuple[int, ...]
+    doors: tuple[int, ...]
+    closed: bool
+
+    def to_map(self) -> dict[str, Any]:
+        """Plain map for encoding."""
+        return {
+            "id": self.id, "polygon": [list(p) for p in self.polygon], "area": self.area,
+            "centroid": list(self.centroid), "walls": list(self.walls), "doors": list(self.doors),
+            "closed": self.closed,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RoomsReply:
+    """What ``{prefix}/map/rooms`` answers and ``{prefix}/map/rooms/updates`` carries."""
+
+    stamp: float | None
+    rooms: tuple[RoomRecord, ...] = ()
+    doors: tuple[DoorRecord, ...] = ()
+
+    def to_map(self) -> dict[str, Any]:
+        """The contract's payload."""
+        return {
+            "v": 1,
+            "frame": "map",
+            "stamp": self.stamp,
+            "rooms": [r.to_map() for r in self.rooms],
+            "doors": [d.to_map() for d in self.doors],
+        }
+
+
+@dataclass
+class _Kept:
+    """An id'd room between updates: its cells as sorted keys, for overlap with the next."""
+
+    id: int
+    keys: NDArray[np.int64]
+
+
+def _keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Cells (i, j) as single sortable integers."""
+    return np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
+
+
+def _pt(p: Array) -> tuple[float, float]:
+    return (round(float(p[0]), 3), round(float(p[1]), 3))
+
+
+@dataclass
+class RoomMap:
+    """The floor seen, the rooms on it and their ids (see the module's doc)."""
+
+    config: RoomsConfig = field(default_factory=RoomsConfig)
+    free: FreeSpace = field(default_factory=FreeSpace)
+    next_room: int = 0
+    next_door: int = 0
+    pending: list[tuple[Array, Array | None, Array | None]] = field(default_factory=list)
+    kept: list[_Kept] = field(default_factory=list)
+    doors: dict[int, Array] = field(default_factory=dict)  # id -> centre
+    reply: RoomsReply = field(default_factory=lambda: RoomsReply(None))
+    seconds: float = 0.0  # the last update's
+    # Frames come from the mapping's thread, updates and saves from others: the pending list
+    # and the grid are touched under this lock only.
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def add_frame(self, pose: Array, origin: Array | None, rays: Array | None) -> None:
+        """A frame's pose (x, y, yaw) and its free rays (robot frame); drawn at the next update."""
+        with self._lock:
+            self.pending.append((np.asarray(pose, dtype=float), origin, rays))
+
+    def _draw_pending(self) -> None:
+        """The frames handed over, drawn into the grid. Call with the lock held."""
+        pending, self.pending = self.pending, []
+        for pose, origin, rays in pending:
+            if rays is not None and origin is not None and len(rays):
+                self.free.add_rays(pose, origin, rays)
+            else:
+                self.free.add_robot(pose[:2])
+
+    def update(self, walls: tuple[WallRecord, ...], stamp: float | None) -> RoomsReply:
+        """Draw the frames handed over, segment, give ids; the new reply (also ``self.reply``)."""
+        with self._lock:
+            return self._update(walls, stamp)
+
+    def _update(self, walls: tuple[WallRecord, ...], stamp: float | None) -> RoomsReply:
+        started = time.perf_counter()
+        self._draw_pending()
+        segments = [
+            WallSegments(w.id, np.asarray(w.segments, dtype=float).reshape(-1, 2, 2))
+            for w in walls
+            if not w.tentative
+        ]
+        layout = find_rooms(segments, self.free, self.config)
+        self.reply = self._records(layout, stamp)
+        self.seconds = time.perf_counter() - started
+        return self.reply
+
+    def _records(self, layout: Layout, stamp: float | None) -> RoomsReply:
+        room_ids = self._room_ids(layout.rooms)
+        door_ids = self._door_ids(layout.doors)
+        doors = tuple(
+            DoorRecord(
+                id=door_ids[k],
+                center=_pt((d.p0 + d.p1) / 2),
+                width=round(float(np.hypot(*(d.p1 - d.p0))), 3),
+                p0=_pt(d.p0),
+                p1=_pt(d.p1),
+                wall=d.wall,
+                rooms=tuple(sorted(room_ids[r] for r in d.rooms)),
+            )
+            for k, d in enumerate(layout.doors)
+        )
+        rooms = tuple(
+            RoomRecord(
+                id=room_ids[k],
+                polygon=tuple(_pt(p) for p in r.polygon),
+                area=round(r.area, 3),
+                centroid=_pt(r.centroid),
+                walls=tuple(sorted(r.walls)),
+                doors=tuple(sorted(d.id for d in doors if room_ids[k] in d.rooms)),
+                closed=r.closed,
+            )
+            for k, r in enumerate(layout.rooms)
+        )
+        return RoomsReply(stamp, tuple(sorted(rooms, key=lambda r: r.id)), doors)
+
+    def _room_ids(self, rooms: list[RoomShape]) -> list[int]:
+        """Each new room's id: the old room it overlaps most, else a new one."""
+        keys = [_keys(r.cells) for r in rooms]
+        pairs = []
+        for k, mine in enumerate(keys):
+            for old in self.kept:
+                shared = len(np.intersect1d(mine, old.keys, assume_unique=True))
+                if shared >= KEEP_SHARE * min(len(mine), len(old.keys)) and shared:
+                    pairs.append((shared, k, old.id))
+        ids: dict[int, int] = {}
+        taken: set[int] = set()
+        for _, k, old_id in sorted(pairs, reverse=True):
+            if k not in ids and old_id not in taken:
+                ids[k], _ = old_id, taken.add(old_id)
+        for k in range(len(rooms)):
+            if k not in ids:
+                ids[k], self.next_room = self.next_room, self.next_room + 1
+        self.kept = [_Kept(ids[k], mine) for k, mine in enumerate(keys)]
+        return [ids[k] for k in range(len(rooms))]
+
+    def _door_ids(self, doors: list[DoorShape]) -> list[int]:
+        """Each new door's id: an old door's near its centre, else a new one."""
+        centres = [(d.p0 + d.p1) / 2 for d in doors]
+        pairs = sorted(
+            (float(np.hypot(*(c - old))), k, old_id)
+            for k, c in enumerate(centres)
+            for old_id, old in self.doors.items()
+            if np.hypot(*(c - old)) <= DOOR_REACH
+        )
+        ids: dict[int, int] = {}
+        taken: set[int] = set()
+        for _, k, old_id in pairs:
+            if k not in ids and old_id not in taken:
+                ids[k], _ = old_id, taken.add(old_id)
+        for k in range(len(doors)):
+            if k not in ids:
+                ids[k], self.next_door = self.next_door, self.next_door + 1
+        self.doors = {ids[k]: c for k, c in enumerate(centres)}
+        return [ids[k] for k in range(len(doors))]
+
+    def to_json(self) -> dict[str, Any]:
+        """For the state file: the floor, the rooms' cells and ids, the doors, the counters."""
+        with self._lock:
+            self._draw_pending()
+            return self._document()
+
+    def _document(self) -> dict[str, Any]:
+        return {
+            "free": self.free.to_json(),
+            "next_room": self.next_room,
+            "next_door": self.next_door,
+            "rooms": [{"id": k.id, "keys": k.keys.tolist()} for k in self.kept],
+            "doors": [{"id": i, "center": c.tolist()} for i, c in self.doors.items()],
+        }
+
+    def restore(self, data: dict[str, Any]) -> None:
+        """Go on where ``to_json`` left off; ValueError says what is wrong."""
+        try:
+            self.free = FreeSpace.from_json(data["free"])
+            self.next_room, self.next_door = int(data["next_room"]), int(data["next_door"])
+            self.kept = [
+                _Kept(int(r["id"]), np.asarray(r["keys"], dtype=np.int64)) for r in data["rooms"]
+            ]
+            self.doors = {
+                int(d["id"]): np.asarray(d["center"], dtype=float).reshape(2) for d in data["doors"]
+            }
+        except (KeyError, TypeError, ValueError) as err:
+            msg = f"rooms: {err}"
+            raise ValueError(msg) from err

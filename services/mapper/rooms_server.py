@@ -1,0 +1,97 @@
+"""``{prefix}/map/rooms`` and its updates: the mapper's rooms, segmented off the frame path.
+
+A worker segments the floor (``RoomMap.update``) at most every ``ROOMS_PERIOD`` while the map
+changes, outside the map's lock: frames are integrated meanwhile, and a query is answered from
+the last reply, already encoded, or from a new one when the map changed since (a query after
+the last frame gets the rooms of the final map). A new reply whose rooms or doors differ from
+the last goes out on ``{prefix}/map/rooms/updates`` (the same payload).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import zenoh
+
+from wallmap.common.codec import encode
+from wallmap.common.runtime import Stats, drain
+from wallmap.common.transport import Keys
+from wallmap.services.mapper import serving
+from wallmap.services.mapper.room_map import RoomsReply
+from wallmap.services.pipeline import Mapping
+
+ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map
+
+
+class RoomsServer:
+    """The rooms' queryable, their updates' publisher, and the worker keeping them current."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        lock: threading.Condition,
+        mapping: Mapping,
+        stats: Stats,
+    ) -> None:
+        self._lock, self._mapping, self._stats = lock, mapping, stats
+        self._queryable = session.declare_queryable(keys.map_rooms)
+        self._updates = session.declare_publisher(keys.map_rooms_updates)
+        self._encoded = self._encode(mapping.rooms.reply)
+        self._seen: tuple[object, ...] | None = None  # the map state last segmented
+        self._refreshing = threading.Lock()  # the worker and the answerer take turns
+
+    @staticmethod
+    def _encode(reply: RoomsReply) -> dict[str, bytes]:
+        body = reply.to_map()
+        return {"msgpack": encode(body), "json": json.dumps(body).encode()}
+
+    def workers(self, stop: threading.Event) -> list[threading.Thread]:
+        """The threads to start: the segmenting worker and the query answerer."""
+        return [
+            threading.Thread(target=self._keep_current, args=(stop,), daemon=True),
+            threading.Thread(target=self._answer, daemon=True),
+        ]
+
+    def undeclare(self) -> None:
+        """Stop answering (the answerer's channel closes)."""
+        self._queryable.undeclare()
+        self._updates.undeclare()
+
+    def _keep_current(self, stop: threading.Event) -> None:
+        while not stop.wait(ROOMS_PERIOD):
+            self._refresh()
+
+    def _refresh(self) -> None:
+        """Segment again if the map changed since the last time; publish what changed."""
+        with self._refreshing:
+            with self._lock:
+                wall_map = self._mapping.map
+                state = (id(wall_map), wall_map.version)
+                if state == self._seen:
+                    return
+                self._seen = state
+                walls = serving.reply(wall_map).walls
+                stamp = wall_map.stamp
+            before = self._mapping.rooms.reply
+            reply = self._mapping.rooms.update(walls, stamp)
+            self._stats.add("room_updates")
+            self._encoded = self._encode(reply)
+            if (reply.rooms, reply.doors) != (before.rooms, before.doors):
+                self._updates.put(self._encoded["msgpack"])
+
+    def _answer(self) -> None:
+        for query in drain(self._queryable.handler):
+            self._refresh()
+            with query:
+                fmt = query.parameters.get("format") or "msgpack"
+                if fmt not in self._encoded:
+                    query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+                    continue
+                encoding = zenoh.Encoding.APPLICATION_JSON if fmt == "json" else None
+                if encoding is None:
+                    query.reply(query.key_expr, self._encoded[fmt])
+                else:
+                    query.reply(query.key_expr, self._encoded[fmt], encoding=encoding)
+            self._stats.add("room_queries")

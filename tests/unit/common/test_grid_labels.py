@@ -1,0 +1,90 @@
+"""Connected components, outlines and simplification against brute-force statements."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import pytest
+
+from wallmap.common.grid_labels import (
+    inside_polygon,
+    label,
+    outline,
+    polygon_area,
+    polygon_centroid,
+    simplify,
+    touches_border,
+)
+
+
+def _bfs_components(mask: np.ndarray) -> list[set[tuple[int, int]]]:
+    seen, parts = set(), []
+    for start in zip(*np.nonzero(mask), strict=True):
+        if start in seen:
+            continue
+        part, todo = set(), deque([start])
+        seen.add(start)
+        while todo:
+            i, j = todo.popleft()
+            part.add((i, j))
+            for a, b in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
+                inside = 0 <= a < mask.shape[0] and 0 <= b < mask.shape[1]
+                if inside and mask[a, b] and (a, b) not in seen:
+                    seen.add((a, b))
+                    todo.append((a, b))
+        parts.append(part)
+    return parts
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_labels_are_the_four_connected_components(seed: int) -> None:
+    mask = np.random.default_rng(seed).random((40, 55)) < 0.55
+    labels, n = label(mask)
+    expected = _bfs_components(mask)
+    assert n == len(expected)
+    assert (labels >= 0).sum() == mask.sum()
+    assert (labels[~mask] == -1).all()
+    for part in expected:
+        values = {int(labels[c]) for c in part}
+        assert len(values) == 1, "a component has one label"
+    assert len({int(labels[next(iter(p))]) for p in expected}) == n, "and no two share one"
+
+
+def test_a_region_reaching_the_edge_is_open() -> None:
+    mask = np.zeros((10, 10), dtype=bool)
+    mask[2:5, 2:5] = True  # enclosed
+    mask[7:, 0:3] = True  # on the edge
+    labels, n = label(mask)
+    border = touches_border(labels, n)
+    assert border[labels[8, 1]]
+    assert not border[labels[3, 3]]
+
+
+def test_an_outline_encloses_its_cells_counter_clockwise() -> None:
+    mask = np.zeros((12, 12), dtype=bool)
+    mask[1:9, 1:4] = True
+    mask[1:4, 1:10] = True  # an L of 8x3 + 3x6 cells
+    loop = outline(mask)
+    assert polygon_area(loop) == pytest.approx(mask.sum()), "counter-clockwise, cell units"
+    corners = simplify(loop, 0.1)
+    assert len(corners) == 6, "an L has six corners"
+    centres = np.argwhere(np.ones_like(mask)) + 0.5
+    assert (inside_polygon(centres, loop) == mask.ravel()).all()
+
+
+def test_an_outline_is_the_outer_boundary_of_a_region_with_a_hole() -> None:
+    mask = np.zeros((9, 9), dtype=bool)
+    mask[1:8, 1:8] = True
+    mask[3:6, 3:6] = False
+    assert polygon_area(outline(mask)) == pytest.approx(49.0)
+
+
+def test_simplify_keeps_a_jagged_diagonal_within_tolerance() -> None:
+    steps = np.array([[i // 2 + (i % 2), i // 2] for i in range(40)], dtype=float)
+    closed = np.vstack([steps, [[0.0, 19.0]]])
+    simple = simplify(closed, 0.8)
+    assert len(simple) <= 4
+    assert polygon_centroid(np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)) == pytest.approx(
+        [1.0, 1.0]
+    )

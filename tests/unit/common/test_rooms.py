@@ -1,0 +1,92 @@
+"""Rooms and doors from a plan's true walls and the floor a robot driving its route sees.
+
+The floor is what the detector's free rays give: from the sensor to the nearest wall that
+returns depth (glass does not), every few centimetres of the route.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wallmap.common.free_space import FreeSpace
+from wallmap.common.grid_labels import inside_polygon
+from wallmap.common.rooms import WallSegments, find_rooms
+from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan, smooth_route
+
+
+def _seen(plan: FloorPlan, route: np.ndarray) -> FreeSpace:
+    free = FreeSpace()
+    for at in route:
+        free.add_rays(np.array([*at, 0.0]), np.zeros(2), free_rays(plan, at))
+    return free
+
+
+def _walls(walls: list[Wall]) -> list[WallSegments]:
+    return [WallSegments(w.id, np.array([[w.p0, w.p1]])) for w in walls]
+
+
+def _iou(a: np.ndarray, b: np.ndarray, step: float = 0.05) -> float:
+    both = np.concatenate([a, b])
+    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
+    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    in_a, in_b = inside_polygon(grid, a), inside_polygon(grid, b)
+    return float((in_a & in_b).sum() / (in_a | in_b).sum())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_strip_of_rooms_gives_each_room_and_each_doorway(seed: int) -> None:
+    plan = generate_floorplan(seed, glass_fraction=0.0)
+    layout = find_rooms(_walls(list(plan.walls)), _seen(plan, smooth_route(plan.route)[::3]))
+    assert len(layout.rooms) == len(plan.rooms), "no false, no split, no missed room"
+    truth_of = {}
+    for k, room in enumerate(layout.rooms):
+        scores = [(_iou(room.polygon, np.array(t.polygon)), t.id) for t in plan.rooms]
+        best, truth_of[k] = max(scores)
+        assert best >= 0.9
+        assert room.closed
+    assert len(set(truth_of.values())) == len(plan.rooms), "one to one"
+    assert len(layout.doors) == len(plan.doors)
+    for door in plan.doors:
+        centre, width = np.add(door.p0, door.p1) / 2, np.hypot(*np.subtract(door.p1, door.p0))
+        found = min(layout.doors, key=lambda d: np.hypot(*((d.p0 + d.p1) / 2 - centre)))
+        assert np.hypot(*((found.p0 + found.p1) / 2 - centre)) < 0.1
+        assert abs(np.hypot(*(found.p1 - found.p0)) - width) < 0.1
+        assert sorted(truth_of[r] for r in found.rooms) == sorted(door.rooms)
+
+
+def _l_room(gap: tuple[float, float] | None) -> list[Wall]:
+    """An L-shaped room (8 x 6 m less a 4 x 3 m corner); its long wall split at ``gap``."""
+    corners = [(0.0, 0.0), (8.0, 0.0), (8.0, 3.0), (4.0, 3.0), (4.0, 6.0), (0.0, 6.0)]
+    walls = []
+    for k, (p, q) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
+        if k == 0 and gap is not None:
+            walls += [Wall(10, p, (gap[0], 0.0)), Wall(11, (gap[1], 0.0), q)]
+        else:
+            walls.append(Wall(k, p, q))
+    return walls
+
+
+def test_an_l_shaped_room_is_one_closed_room_of_its_area() -> None:
+    walls = _l_room(None)
+    route = np.array(
+        [[1.0 + 0.1 * k, 1.5] for k in range(60)] + [[2.0, 1.5 + 0.1 * k] for k in range(35)]
+    )
+    plan = FloorPlan(walls=tuple(walls))
+    layout = find_rooms(_walls(walls), _seen(plan, route))
+    assert len(layout.rooms) == 1
+    assert not layout.doors
+    assert layout.rooms[0].closed
+    assert layout.rooms[0].area == pytest.approx(36.0, rel=0.03)
+
+
+def test_a_stretch_never_seen_through_is_wall_not_a_door() -> None:
+    """Glass across the band: the rays stop short of it (no return), the robot stays away."""
+    walls = _l_room((3.0, 4.5))  # 1.5 m of the long wall returns nothing
+    route = np.array([[1.0 + 0.1 * k, 1.5] for k in range(60)])
+    plan = FloorPlan(walls=tuple(walls))
+    layout = find_rooms(_walls(walls), _seen(plan, route))
+    assert len(layout.rooms) == 1
+    assert not layout.doors
+    assert layout.rooms[0].closed, "the gap is closed as wall"
