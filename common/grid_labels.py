@@ -210,3 +210,24 @@ def inside_polygon(points: Array, polygon: Array) -> NDArray[np.bool_]:
             at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
         inside ^= crosses & (x < at)
     return inside
+
+
+def convex_hull(points: Array) -> Array:
+    """The convex hull of ``points`` (n, 2), counter-clockwise (Andrew's monotone chain)."""
+    pts = np.unique(points, axis=0)
+    if len(pts) < 3:
+        return pts
+
+    def half(ordered: Array) -> list[Array]:
+        chain: list[Array] = []
+        for p in ordered:
+            while len(chain) >= 2:
+                (ax, ay), (bx, by) = chain[-2], chain[-1]
+                if (bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax) > 0:
+                    break
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])

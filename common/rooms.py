@@ -34,6 +34,8 @@ from numpy.typing import NDArray
 
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.grid_labels import (
+    convex_hull,
+    inside_polygon,
     label,
     outline,
     polygon_area,
@@ -58,6 +60,9 @@ class RoomsConfig:
         barrier: half thickness (m) of walls and openings while the floor is divided.
         min_area: smallest room (m^2).
         simplify: how far (m) an outline may stray from its cells.
+        blind_max: longest span (m) closed as an unseen wall (glass) where nothing crossed it.
+        blind_angle: how far (deg) such a span may turn from its wall's direction.
+        blind_seen: share of a span's cells seen free beyond which it is a passage, not glass.
     """
 
     door_min: float = 0.6
@@ -67,6 +72,9 @@ class RoomsConfig:
     barrier: float = 0.1
     min_area: float = 1.0
     simplify: float = 0.12
+    blind_max: float = 8.0
+    blind_angle: float = 60.0
+    blind_seen: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -124,30 +132,54 @@ class Layout:
     doors: list[DoorShape]
 
 
-def openings(walls: Sequence[WallSegments], config: RoomsConfig) -> list[Opening]:
-    """Every segment end's opening to the nearest wall roughly along its own wall (step 1)."""
+def _free_ends(walls: Sequence[WallSegments], joint: float) -> tuple[list[_End], Array, Array]:
+    """The segment ends not joined to another wall, and every segment's ends (a, b)."""
     pieces = [
         (w.id, s) for w in walls for s in np.asarray(w.segments, dtype=float).reshape(-1, 2, 2)
     ]
-    if len(pieces) < 2:
-        return []
-    a = np.array([s[0] for _, s in pieces])
-    b = np.array([s[1] for _, s in pieces])
-    cos_max = math.cos(math.radians(config.door_angle))
-    found: dict[tuple[float, ...], Opening] = {}
+    a = np.array([s[0] for _, s in pieces]).reshape(-1, 2)
+    b = np.array([s[1] for _, s in pieces]).reshape(-1, 2)
+    ends = []
     for k, (wall, seg) in enumerate(pieces):
         for end, other in ((seg[0], seg[1]), (seg[1], seg[0])):
             outward = end - other
             norm = float(np.hypot(*outward))
-            if norm < 1e-9:
-                continue
-            if _distance_to_others(end, a, b, k) < config.joint:
-                continue  # joined to another wall: the wall goes on there
-            target = _nearest_ahead(end, outward / norm, a, b, k, config.door_max, cos_max)
-            if target is None or _crosses_walls(end, target, a, b, k):
-                continue
-            key = tuple(np.round(np.concatenate(sorted([end, target], key=tuple)), 2).tolist())
-            found.setdefault(key, Opening(wall, end.copy(), target))
+            if len(pieces) > 1 and norm > 1e-9 and _distance_to_others(end, a, b, k) >= joint:
+                ends.append(_End(wall, k, end.copy(), outward / norm))
+    return ends, a, b
+
+
+@dataclass(frozen=True)
+class _End:
+    """A segment's end that no other wall meets: where an opening may start."""
+
+    wall: int
+    piece: int
+    point: Array
+    outward: Array
+
+
+def openings(
+    walls: Sequence[WallSegments],
+    config: RoomsConfig,
+    reach: float | None = None,
+    angle: float | None = None,
+) -> list[Opening]:
+    """Every free end's opening to the nearest wall roughly along its own wall (step 1).
+
+    ``reach`` and ``angle``: how far and how far off its wall's direction to look (the
+    configuration's door width and angle unless given).
+    """
+    ends, a, b = _free_ends(walls, config.joint)
+    reach = config.door_max if reach is None else reach
+    cos_max = math.cos(math.radians(config.door_angle if angle is None else angle))
+    found: dict[tuple[float, ...], Opening] = {}
+    for end in ends:
+        target = _nearest_ahead(end.point, end.outward, a, b, end.piece, reach, cos_max)
+        if target is None or _crosses_walls(end.point, target, a, b, end.piece):
+            continue
+        key = tuple(np.round(np.concatenate(sorted([end.point, target], key=tuple)), 2).tolist())
+        found.setdefault(key, Opening(end.wall, end.point, target))
     return list(found.values())
 
 
@@ -256,9 +288,12 @@ def find_rooms(
         for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
             grid.draw(barrier, p, q, radius)
     spans = [o for o in openings(walls, config) if o.width > 0]
-    for span in spans:
+    for span in [*spans, *_blind_spans(grid, walls, spans, config)]:
         grid.draw(barrier, span.p0, span.p1, radius)
     labels, rooms = _regions(grid, barrier, config)
+    for k, closed in enumerate(rooms):
+        if not closed:
+            _fill_open(grid, labels, barrier, k)
     _grow(labels, barrier, math.ceil(radius / grid.cell))
     shapes = [_shape(grid, labels == k, closed, config) for k, closed in enumerate(rooms)]
     _bounding_walls(grid, labels, walls, shapes, radius)
@@ -268,6 +303,27 @@ def find_rooms(
         if span.width >= config.door_min and (door := _door(grid, labels, span, radius)) is not None
     ]
     return Layout(shapes, doors)
+
+
+def _blind_spans(
+    grid: _Grid, walls: Sequence[WallSegments], spans: list[Opening], config: RoomsConfig
+) -> list[Opening]:
+    """Longer spans from ends left open that nothing was ever seen through: glass, closed.
+
+    A wall the sensor cannot see (glass across the band) leaves its neighbours' ends open; the
+    rays stop at it and the robot does not cross it, so the floor along the span is unseen.
+    A passage the robot drove or looked through is seen free and stays open.
+    """
+    used = {tuple(np.round(p, 3)) for s in spans for p in (s.p0, s.p1)}
+    found = []
+    for span in openings(walls, config, config.blind_max, config.blind_angle):
+        if tuple(np.round(span.p0, 3)) in used or span.width <= config.door_max:
+            continue
+        t = np.linspace(0.0, 1.0, max(3, int(span.width / grid.cell)))[:, None]
+        i, j, ok = grid.local(span.p0 + t * (span.p1 - span.p0))
+        if grid.free[i[ok], j[ok]].mean() <= config.blind_seen if ok.any() else True:
+            found.append(span)
+    return found
 
 
 def _regions(
@@ -290,6 +346,44 @@ def _regions(
         labels[pieces == k] = len(closed)
         closed.append(False)
     return labels, closed
+
+
+def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_], k: int) -> None:
+    """An open room's unseen floor within the hull of its seen floor and the walls it faces.
+
+    Glass returns nothing, so the floor before it is never seen: the room's walls and seen
+    floor still span it. Only cells of no room and no barrier are taken.
+    """
+    mine = labels == k
+    near = barrier & _dilate(mine, 2)
+    ii, jj = np.nonzero(_edge(mine) | near)
+    if len(ii) < 3:
+        return
+    hull = convex_hull(np.stack([ii, jj], axis=1).astype(float))
+    lo, hi = hull.min(axis=0).astype(int), hull.max(axis=0).astype(int)
+    bi, bj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    inside = inside_polygon(np.stack([bi.ravel(), bj.ravel()], axis=1) + 0.0, hull).reshape(
+        bi.shape
+    )
+    take = inside & (labels[bi, bj] < 0) & ~barrier[bi, bj]
+    labels[bi[take], bj[take]] = k
+
+
+def _dilate(mask: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
+    out = mask.copy()
+    for _ in range(steps):
+        grown = out.copy()
+        grown[1:] |= out[:-1]
+        grown[:-1] |= out[1:]
+        grown[:, 1:] |= out[:, :-1]
+        grown[:, :-1] |= out[:, 1:]
+        out = grown
+    return out
+
+
+def _edge(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Cells of ``mask`` with a neighbour outside it."""
+    return mask & _dilate(~mask, 1)
 
 
 def _grow(labels: NDArray[np.int32], barrier: NDArray[np.bool_], steps: int) -> None:

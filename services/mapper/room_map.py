@@ -28,6 +28,8 @@ Array = NDArray[np.float64]
 
 KEEP_SHARE = 0.3  # of the smaller room's cells shared with an old room: the same room
 DOOR_REACH = 0.5  # m between an old door's centre and a new one's: the same door
+KEEP_MOVE = 0.1  # m the robot moves, or
+KEEP_TURN = np.radians(5.0)  # it turns, before a frame's rays are drawn again
 
 
 @dataclass(frozen=True)
@@ -124,19 +126,28 @@ class RoomMap:
     # and the grid are touched under this lock only.
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
+    _last: Array | None = field(default=None, repr=False)  # the pose of the last frame kept
+
     def add_frame(self, pose: Array, origin: Array | None, rays: Array | None) -> None:
-        """A frame's pose (x, y, yaw) and its free rays (robot frame); drawn at the next update."""
+        """A frame's pose (x, y, yaw) and its free rays (robot frame); drawn at the next update.
+
+        Only a frame ``KEEP_MOVE`` or ``KEEP_TURN`` from the last one kept: at 30 frames a
+        second a camera sees the same floor many times over, and each drawn frame costs.
+        """
+        pose = np.asarray(pose, dtype=float)
+        last = self._last
+        if last is not None:
+            turn = abs((pose[2] - last[2] + np.pi) % (2 * np.pi) - np.pi)
+            if np.hypot(*(pose[:2] - last[:2])) < KEEP_MOVE and turn < KEEP_TURN:
+                return
+        self._last = pose
         with self._lock:
-            self.pending.append((np.asarray(pose, dtype=float), origin, rays))
+            self.pending.append((pose, origin, rays))
 
     def _draw_pending(self) -> None:
         """The frames handed over, drawn into the grid. Call with the lock held."""
         pending, self.pending = self.pending, []
-        for pose, origin, rays in pending:
-            if rays is not None and origin is not None and len(rays):
-                self.free.add_rays(pose, origin, rays)
-            else:
-                self.free.add_robot(pose[:2])
+        self.free.add_frames(pending)
 
     def update(self, walls: tuple[WallRecord, ...], stamp: float | None) -> RoomsReply:
         """Draw the frames handed over, segment, give ids; the new reply (also ``self.reply``)."""

@@ -16,9 +16,10 @@ def _free_at(space: FreeSpace, x: float, y: float) -> int:
 def test_a_ray_frees_the_floor_up_to_short_of_its_end() -> None:
     space = FreeSpace()
     pose = np.array([1.0, 2.0, np.pi / 2])  # facing +y
-    for _ in range(MIN_FREE):
-        space.add_rays(pose, np.zeros(2), np.array([[3.0, 0.0]]))  # 3 m ahead: to y = 5
-    assert _free_at(space, 1.05, 3.55) == MIN_FREE
+    space.add_rays(pose, np.zeros(2), np.array([[3.0, 0.0]]))  # 3 m ahead: to y = 5
+    assert 0 < _free_at(space, 1.05, 3.55) < MIN_FREE, "one ray is not yet free floor"
+    space.add_frames([(pose, np.zeros(2), np.array([[3.0, 0.0]]))])
+    assert _free_at(space, 1.05, 3.55) >= MIN_FREE
     assert _free_at(space, 1.05, 5.0 - RAY_SHORT + 0.5 * CELL) == 0, "not the last stretch"
     assert _free_at(space, 3.0, 3.5) == 0, "nor beside the ray"
     assert space.free().sum() > 25
@@ -28,8 +29,8 @@ def test_the_grid_grows_keeping_its_counts_and_a_state_file_restores_it() -> Non
     space = FreeSpace()
     space.add_robot(np.array([0.0, 0.0]))
     space.add_rays(np.array([0.0, 0.0, 0.0]), np.zeros(2), np.array([[-20.0, 15.0]]))
-    assert _free_at(space, 0.05, 0.05) == 2, "the robot, then the ray's start"
-    assert _free_at(space, -10.0, 7.5) == 1
+    assert _free_at(space, 0.05, 0.05) >= MIN_FREE, "the robot stands on free floor"
+    assert 0 < _free_at(space, -10.0, 7.5) < MIN_FREE, "one ray, far off"
     again = FreeSpace.from_json(space.to_json())
     assert (again.counts == space.counts).all()
     assert (again.origin == space.origin).all()
@@ -37,6 +38,6 @@ def test_the_grid_grows_keeping_its_counts_and_a_state_file_restores_it() -> Non
 
 def test_counts_saturate_instead_of_wrapping() -> None:
     space = FreeSpace()
-    for _ in range(300):
+    for _ in range(100):
         space.add_robot(np.array([0.0, 0.0]))
     assert _free_at(space, 0.05, 0.05) == 255

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.grid_labels import (
+    convex_hull,
     inside_polygon,
     label,
     outline,
@@ -88,3 +89,12 @@ def test_simplify_keeps_a_jagged_diagonal_within_tolerance() -> None:
     assert polygon_centroid(np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)) == pytest.approx(
         [1.0, 1.0]
     )
+
+
+def test_the_convex_hull_holds_every_point_and_only_corners() -> None:
+    points = np.random.default_rng(3).random((200, 2)) * 10
+    hull = convex_hull(points)
+    assert polygon_area(hull) > 0
+    assert inside_polygon(points * 0.999 + 0.005, hull).mean() > 0.97
+    square = np.array([[0, 0], [4, 0], [4, 4], [0, 4], [2, 2], [2, 0]], dtype=float)
+    assert sorted(map(tuple, convex_hull(square))) == [(0, 0), (0, 4), (4, 0), (4, 4)]
