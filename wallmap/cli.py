@@ -15,7 +15,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import zenoh
 
@@ -157,10 +157,15 @@ def _fetch(args: argparse.Namespace, config: Config, **parameters: str) -> MapRe
         return fetch_map(session, Keys(config.zenoh.prefix), query, timeout=args.timeout)
 
 
+def _fetch_rooms(args: argparse.Namespace, config: Config) -> dict[str, Any]:
+    """The live rooms and doors (``{prefix}/map/rooms``)."""
+    with open_session(config.zenoh) as session:
+        return fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout)
+
+
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
     if args.rooms:
-        with open_session(config.zenoh) as session:
-            body = fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout)
+        body = _fetch_rooms(args, config)
         print(json.dumps(body, indent=1) if args.json else format_rooms(body))
         return 0
     filters = {"bbox": args.bbox, "since": None if args.since is None else repr(args.since)}
@@ -247,13 +252,15 @@ def _glitch(text: str) -> object:
 def _cmd_plot(args: argparse.Namespace, config: Config) -> int:
     from wallmap.plot import write_picture  # noqa: PLC0415 - see _cmd_scene
 
-    write_picture(args.out, _fetch(args, config, trajectory="true"), size=args.size)
+    reply = _fetch(args, config, trajectory="true")
+    write_picture(args.out, reply, size=args.size, rooms=_fetch_rooms(args, config))
     print(f"picture: {args.out}")
     return 0
 
 
 def _cmd_export(args: argparse.Namespace, config: Config) -> int:
-    write_geojson(args.out, _fetch(args, config, trajectory="true"))
+    reply = _fetch(args, config, trajectory="true")
+    write_geojson(args.out, reply, _fetch_rooms(args, config))
     print(f"GeoJSON: {args.out}")
     return 0
 

@@ -49,11 +49,39 @@ def _trajectory_feature(rows: Sequence[Sequence[float]]) -> dict[str, Any]:
     return {"type": "Feature", "geometry": geometry, "properties": properties}
 
 
-def to_geojson(reply: MapReply) -> dict[str, Any]:
-    """A FeatureCollection: one feature per wall, then the trajectory if the reply has one."""
+def _room_feature(room: dict[str, Any]) -> dict[str, Any]:
+    """A room as a Polygon: its outline, closed (first point again last), counter-clockwise."""
+    ring = [_xy(p) for p in room["polygon"]]
+    geometry = {"type": "Polygon", "coordinates": [[*ring, ring[0]]] if ring else []}
+    properties = {
+        "kind": "room",
+        **{k: room[k] for k in ("id", "area", "walls", "doors", "closed")},
+    }
+    properties["centroid"] = _xy(room["centroid"])
+    return {"type": "Feature", "id": f"room-{room['id']}", "geometry": geometry,
+            "properties": properties}  # fmt: skip
+
+
+def _door_feature(door: dict[str, Any]) -> dict[str, Any]:
+    """A door as a LineString across its opening, jamb to jamb."""
+    geometry = {"type": "LineString", "coordinates": [_xy(door["p0"]), _xy(door["p1"])]}
+    properties = {"kind": "door", **{k: door[k] for k in ("id", "width", "wall", "rooms")}}
+    properties["center"] = _xy(door["center"])
+    return {"type": "Feature", "id": f"door-{door['id']}", "geometry": geometry,
+            "properties": properties}  # fmt: skip
+
+
+def to_geojson(reply: MapReply, rooms: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A FeatureCollection: one feature per wall, the trajectory if the reply has one.
+
+    Then a Polygon per room and a LineString per door of ``rooms`` (the mapper's rooms reply).
+    """
     features = [_wall_feature(w) for w in reply.walls]
     if reply.trajectory:
         features.append(_trajectory_feature(reply.trajectory))
+    if rooms is not None:
+        features += [_room_feature(r) for r in rooms.get("rooms", ())]
+        features += [_door_feature(d) for d in rooms.get("doors", ())]
     properties = {
         "frame": reply.frame,
         "units": "m",
@@ -65,7 +93,7 @@ def to_geojson(reply: MapReply) -> dict[str, Any]:
     return {"type": "FeatureCollection", "properties": properties, "features": features}
 
 
-def write_geojson(path: Path, reply: MapReply) -> None:
-    """Write ``to_geojson(reply)`` to a file (strict JSON: non-finite numbers are an error)."""
-    text = json.dumps(to_geojson(reply), allow_nan=False, indent=1)
+def write_geojson(path: Path, reply: MapReply, rooms: dict[str, Any] | None = None) -> None:
+    """Write ``to_geojson(reply, rooms)`` to a file (strict JSON: non-finite is an error)."""
+    text = json.dumps(to_geojson(reply, rooms), allow_nan=False, indent=1)
     Path(path).write_text(text + "\n", encoding="utf-8")

@@ -275,7 +275,8 @@ def _report(
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)
         reply = fetch_map(session, Keys(config.zenoh.prefix), query)
-        rooms = fetch_rooms(session, Keys(config.zenoh.prefix)) if options.json_out else None
+        wanted = options.json_out or options.picture
+        rooms = fetch_rooms(session, Keys(config.zenoh.prefix)) if wanted else None
     if partial:
         print(f"stopped before the end of the recording: the map of its first {reply.frames} "
               "frames")  # fmt: skip
@@ -293,7 +294,7 @@ def _report(
         document = to_json(reply, config=to_plain(config), partial=partial, rooms=rooms)
         options.json_out.write_text(document, "utf-8")
     if options.picture:
-        write_picture(options.picture, reply)
+        write_picture(options.picture, reply, rooms=rooms)
         print(f"picture: {options.picture}")
 
 

@@ -42,6 +42,9 @@ GAP_COLOUR = "#d9908a"
 TRAJECTORY_COLOUR = "#2b6cb0"
 LABEL_COLOUR = "#202020"
 SCALE_COLOUR = "#000000"
+ROOM_COLOURS = ("#f6c85f", "#9dd866", "#6fb1d8", "#ca472f", "#a27ea8", "#ffa056", "#8dddd0")
+ROOM_OPACITY = 0.28
+DOOR_COLOUR = "#2f855a"
 POINT_COLOUR = "#b8b8b8"
 
 _PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # +90 degrees
@@ -233,6 +236,7 @@ def render_map(
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
+    rooms: dict[str, Any] | None = None,
 ) -> Drawing:
     """Lay out a map reply as a picture whose longer side is about ``size`` pixels.
 
@@ -243,11 +247,16 @@ def render_map(
         size: pixels of the longer side; line widths and text scale with it.
         points: (N, 2) sensor points in the map frame, drawn grey under the walls (what the
             map should cover), one square per pixel they fall in.
+        rooms: the mapper's rooms reply (``{prefix}/map/rooms``): each room filled under the
+            walls and labelled with its id and area, each door drawn across its opening.
     """
     walls = [_wall_geometry(w) for w in reply.walls]
+    room_list = [] if rooms is None else list(rooms.get("rooms", ()))
+    door_list = [] if rooms is None else list(rooms.get("doors", ()))
     path = _trajectory_xy(reply, trajectory)
     cloud = np.zeros((0, 2)) if points is None else np.asarray(points, dtype=float)
     content = [path, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
+    content += [np.asarray(r["polygon"], dtype=float) for r in room_list]
     everything = np.vstack([c.reshape(-1, 2) for c in content])
     if len(everything) == 0:
         everything = np.array([[-1.0, -1.0], [1.0, 1.0]])
@@ -266,6 +275,9 @@ def render_map(
     unit = size / 1000  # line widths and text grow with the picture
     items = drawing.items
     px = drawing.to_px
+    for k, room in enumerate(room_list):
+        colour = ROOM_COLOURS[room["id"] % len(ROOM_COLOURS)] if "id" in room else ROOM_COLOURS[k]
+        items.append(Fill(px(np.asarray(room["polygon"], float)), colour, ROOM_OPACITY, "room"))
     if len(cloud):
         pixels = np.unique(np.floor(px(cloud)).astype(np.int64), axis=0)
         square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]) * max(1.0, unit)
@@ -281,7 +293,14 @@ def render_map(
         items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), TRAJECTORY_COLOUR, "start"))
     for w in walls:
         items.extend(Stroke(px(p), max(2.0, 3 * unit), WALL_COLOUR, "wall") for p in w.pieces)
+    for door in door_list:
+        span = px(np.array([door["p0"], door["p1"]], dtype=float))
+        items.append(Stroke(span, max(3.0, 5 * unit), DOOR_COLOUR, "door"))
     glyph = max(5.0, 5 * round(2 * unit))  # whole bitmap-font pixels in the PNG
+    for room in room_list:
+        centre = px(np.asarray(room["centroid"], dtype=float))
+        text = f"R{room['id']} {room['area']:.1f} m"
+        items.append(Label((centre[0], centre[1]), text, glyph, LABEL_COLOUR, "room-label"))
     for w in walls:
         ends = np.array([w.pieces[0][0], w.pieces[-1][1]])
         middle = px(ends.mean(axis=0))
@@ -369,6 +388,7 @@ _FONT_ROWS = {
     "-": ("...", "...", "###", "...", "..."),
     ".": (".", ".", ".", ".", "#"),
     "m": (".....", ".....", "####.", "#.#.#", "#.#.#"),
+    "R": ("##.", "#.#", "##.", "#.#", "#.#"),
     " ": ("..", "..", "..", "..", ".."),
 }
 _FONT = {c: np.array([[ch == "#" for ch in row] for row in rows]) for c, rows in _FONT_ROWS.items()}
@@ -547,9 +567,10 @@ def write_png(
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
+    rooms: dict[str, Any] | None = None,
 ) -> None:
     """Draw a map reply to a PNG file (see ``render_map``)."""
-    drawing = render_map(reply, trajectory=trajectory, size=size, points=points)
+    drawing = render_map(reply, trajectory=trajectory, size=size, points=points, rooms=rooms)
     Path(path).write_bytes(drawing.to_png())
 
 
@@ -559,9 +580,10 @@ def write_svg(
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
+    rooms: dict[str, Any] | None = None,
 ) -> None:
     """Draw a map reply to an SVG file (see ``render_map``)."""
-    svg = render_map(reply, trajectory=trajectory, size=size, points=points).to_svg()
+    svg = render_map(reply, trajectory=trajectory, size=size, points=points, rooms=rooms).to_svg()
     Path(path).write_text(svg, encoding="utf-8")
 
 
@@ -571,10 +593,11 @@ def write_picture(
     trajectory: Array | None = None,
     size: int = 1000,
     points: Array | None = None,
+    rooms: dict[str, Any] | None = None,
 ) -> None:
     """PNG or SVG by the file's suffix, for commands taking one ``--out``; ValueError else."""
     problem = picture_problem(Path(path))
     if problem is not None:
         raise ValueError(problem)
     writer = write_png if Path(path).suffix.lower() == ".png" else write_svg
-    writer(path, reply, trajectory, size, points)
+    writer(path, reply, trajectory, size, points, rooms)

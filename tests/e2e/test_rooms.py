@@ -1,0 +1,92 @@
+"""Rooms and doors through real processes: `wallmap up --json-out`, `wallmap query --rooms`.
+
+A generated strip of three rooms joined by two doorways, played --fast through router, player,
+detector and mapper; the rooms and doors the mapper serves against the plan's truth.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import run_wallmap
+
+from wallmap.common.grid_labels import inside_polygon
+from wallmap.scene import load_truth
+
+pytestmark = pytest.mark.e2e
+
+
+@pytest.fixture(scope="module")
+def strip(scene_bags):
+    """Seed 1: three rooms, two doorways; glass in two outer walls (the rooms there open)."""
+    return scene_bags("rooms.bag", seed=1, n_frames=900, fmt="ros1", sensor="depth16")
+
+
+def _iou(a: list, b: list, step: float = 0.05) -> float:
+    both = np.concatenate([a, b])
+    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
+    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    in_a, in_b = inside_polygon(grid, np.asarray(a)), inside_polygon(grid, np.asarray(b))
+    return float((in_a & in_b).sum() / (in_a | in_b).sum())
+
+
+def _assert_rooms_match(body: dict, truth_path) -> None:
+    plan = load_truth(truth_path)[0]
+    assert body["v"] == 1
+    assert body["frame"] == "map"
+    rooms = {r["id"]: r for r in body["rooms"]}
+    assert len(rooms) == len(plan.rooms), "no false, split or missed room"
+    truth_of = {}
+    for room_id, room in rooms.items():
+        score, truth_of[room_id] = max((_iou(room["polygon"], t.polygon), t.id) for t in plan.rooms)
+        assert score >= 0.7, (room_id, score)
+        assert room["area"] == pytest.approx(abs(_area(room["polygon"])), rel=1e-2)
+    assert len(set(truth_of.values())) == len(rooms), "one to one"
+    assert max(_iou(r["polygon"], plan.rooms[truth_of[i]].polygon) for i, r in rooms.items()) > 0.9
+    assert len(body["doors"]) == len(plan.doors)
+    for door in plan.doors:
+        centre = np.add(door.p0, door.p1) / 2
+        found = min(body["doors"], key=lambda d: np.hypot(*(np.array(d["center"]) - centre)))
+        assert np.hypot(*(np.array(found["center"]) - centre)) < 0.3
+        assert abs(found["width"] - np.hypot(*np.subtract(door.p1, door.p0))) < 0.3
+        assert sorted(truth_of[r] for r in found["rooms"]) == sorted(door.rooms)
+        assert all(found["id"] in rooms[r]["doors"] for r in found["rooms"])
+
+
+def _area(polygon: list) -> float:
+    x, y = np.asarray(polygon).T
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def test_up_writes_the_rooms_and_doors_of_the_building(strip, tmp_path) -> None:
+    out = tmp_path / "map.json"
+    run_wallmap("up", str(strip.path), "--fast", "--exit-when-done", "--json-out", str(out))
+    _assert_rooms_match(json.loads(out.read_text())["rooms"], strip.truth_path)
+
+
+def test_query_plot_and_export_show_the_live_mappers_rooms(stack, strip, tmp_path) -> None:
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    stack.run("player", str(strip.path), "--fast", *stack.zenoh_args)
+    done = stack.run("query", "--rooms", "--json", *stack.zenoh_args, timeout=30)
+    _assert_rooms_match(json.loads(done.stdout), strip.truth_path)
+    table = stack.run("query", "--rooms", *stack.zenoh_args, timeout=30).stdout
+    assert table.startswith("3 rooms, 2 doors")
+
+    svg, geojson = tmp_path / "map.svg", tmp_path / "map.geojson"
+    stack.run("plot", str(svg), *stack.zenoh_args, timeout=30)
+    drawn = svg.read_text()
+    assert drawn.count("<polygon class=\"room\"") == 3
+    assert drawn.count("class=\"door\"") == 2
+    assert drawn.count("class=\"room-label\"") == 3
+    stack.run("export", str(geojson), *stack.zenoh_args, timeout=30)
+    features = json.loads(geojson.read_text())["features"]
+    polygons = [f for f in features if f["properties"]["kind"] == "room"]
+    doors = [f for f in features if f["properties"]["kind"] == "door"]
+    assert [f["geometry"]["type"] for f in polygons] == ["Polygon"] * 3
+    assert [f["geometry"]["type"] for f in doors] == ["LineString"] * 2
+    ring = polygons[0]["geometry"]["coordinates"][0]
+    assert ring[0] == ring[-1], "a closed ring"
