@@ -79,9 +79,9 @@ def test_query_plot_and_export_show_the_live_mappers_rooms(stack, strip, tmp_pat
     svg, geojson = tmp_path / "map.svg", tmp_path / "map.geojson"
     stack.run("plot", str(svg), *stack.zenoh_args, timeout=30)
     drawn = svg.read_text()
-    assert drawn.count("<polygon class=\"room\"") == 3
-    assert drawn.count("class=\"door\"") == 2
-    assert drawn.count("class=\"room-label\"") == 3
+    assert drawn.count('<polygon class="room"') == 3
+    assert drawn.count('class="door"') == 2
+    assert drawn.count('class="room-label"') == 3
     stack.run("export", str(geojson), *stack.zenoh_args, timeout=30)
     features = json.loads(geojson.read_text())["features"]
     polygons = [f for f in features if f["properties"]["kind"] == "room"]
