@@ -333,6 +333,11 @@ class Keys:
         return f"{self.prefix}/map/updates"
 
     @property
+    def room_markers(self) -> str:
+        """ROS 2 out: visualization_msgs/msg/MarkerArray (CDR) of the rooms and doors."""
+        return f"{self.prefix}/rooms/markers"
+
+    @property
     def map_rooms(self) -> str:
         """Queryable: the rooms and the doors between them (``services.mapper.room_map``)."""
         return f"{self.prefix}/map/rooms"

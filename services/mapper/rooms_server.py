@@ -4,7 +4,8 @@ A worker segments the floor (``RoomMap.update``) at most every ``ROOMS_PERIOD`` 
 changes, outside the map's lock: frames are integrated meanwhile, and a query is answered from
 the last reply, already encoded, or from a new one when the map changed since (a query after
 the last frame gets the rooms of the final map). A new reply whose rooms or doors differ from
-the last goes out on ``{prefix}/map/rooms/updates`` (the same payload).
+the last goes out on ``{prefix}/map/rooms/updates`` (the same payload), and with ROS 2 out
+as markers on ``{prefix}/rooms/markers``.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from wallmap.common.runtime import Stats, drain
 from wallmap.common.transport import Keys
 from wallmap.services.mapper import serving
 from wallmap.services.mapper.room_map import RoomsReply
+from wallmap.services.mapper.ros2_out import RoomMarkers
 from wallmap.services.pipeline import Mapping
 
 ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map
@@ -34,8 +36,10 @@ class RoomsServer:
         lock: threading.Condition,
         mapping: Mapping,
         stats: Stats,
+        ros2_out: bool = False,
     ) -> None:
         self._lock, self._mapping, self._stats = lock, mapping, stats
+        self._markers = RoomMarkers(session, keys) if ros2_out else None
         self._queryable = session.declare_queryable(keys.map_rooms)
         self._updates = session.declare_publisher(keys.map_rooms_updates)
         self._encoded = self._encode(mapping.rooms.reply)
@@ -58,6 +62,8 @@ class RoomsServer:
         """Stop answering (the answerer's channel closes)."""
         self._queryable.undeclare()
         self._updates.undeclare()
+        if self._markers is not None:
+            self._markers.undeclare()
 
     def _keep_current(self, stop: threading.Event) -> None:
         while not stop.wait(ROOMS_PERIOD):
@@ -80,6 +86,8 @@ class RoomsServer:
             self._encoded = self._encode(reply)
             if (reply.rooms, reply.doors) != (before.rooms, before.doors):
                 self._updates.put(self._encoded["msgpack"])
+                if self._markers is not None:
+                    self._markers.publish(reply.to_map())
 
     def _answer(self) -> None:
         for query in drain(self._queryable.handler):

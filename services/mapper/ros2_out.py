@@ -8,7 +8,8 @@ namespace as the prefix (docs/ros2.md) and ``/wallmap/markers`` appears in ROS 2
 One marker per confirmed wall: namespace ``walls``, ``id`` = the wall id, ``LINE_LIST`` whose
 point pairs are the wall's segments in the map frame, in the order the map reply lists them.
 Ids that were published and are no longer served (merged away, or no longer confirmed) get a
-``DELETE`` once. The path is the keyframes of the poses the mapper used.
+``DELETE`` once. The path is the keyframes of the poses the mapper used. The rooms go on
+``{prefix}/rooms/markers`` (``RoomMarkers``): outlines, labels and doors.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -56,17 +58,49 @@ def _identity() -> Any:
     )
 
 
-def _marker(wall_id: int, action: int, points: list[Any], stamp: float, frame: str) -> Any:
+@dataclass(frozen=True)
+class _Look:
+    """How a kind of marker looks: its namespace, type name, line width (or text height), colour."""
+
+    ns: str
+    kind: str
+    width: float
+    colour: tuple[float, float, float, float]
+
+
+WALLS = _Look(NAMESPACE, "LINE_LIST", LINE_WIDTH, COLOUR)
+ROOMS = _Look("rooms", "LINE_STRIP", 0.03, (0.2, 0.45, 0.8, 1.0))
+ROOM_LABELS = _Look("room_labels", "TEXT_VIEW_FACING", 0.3, (0.1, 0.1, 0.1, 1.0))
+DOORS = _Look("doors", "LINE_LIST", 0.08, (0.18, 0.52, 0.35, 1.0))
+
+
+def _marker(
+    look: _Look,
+    marker_id: int,
+    action: int,
+    points: list[Any],
+    stamp: float,
+    frame: str,
+    at: tuple[float, float] = (0.0, 0.0),
+    text: str = "",
+) -> Any:
     marker_type = _msg("visualization_msgs/msg/Marker")
+    pose = _identity()
+    pose.position = _point(*at)
+    red, green, blue, alpha = look.colour
     return marker_type(
         header=_header(stamp, frame),
-        ns=NAMESPACE,
-        id=int(wall_id),
-        type=marker_type.LINE_LIST,
+        ns=look.ns,
+        id=int(marker_id),
+        type=getattr(marker_type, look.kind),
         action=action,
-        pose=_identity(),
-        scale=_msg("geometry_msgs/msg/Vector3")(x=LINE_WIDTH, y=0.0, z=0.0),
-        color=_msg("std_msgs/msg/ColorRGBA")(r=COLOUR[0], g=COLOUR[1], b=COLOUR[2], a=COLOUR[3]),
+        pose=pose,
+        scale=_msg("geometry_msgs/msg/Vector3")(
+            x=look.width if look.kind != "TEXT_VIEW_FACING" else 0.0,
+            y=0.0,
+            z=look.width if look.kind == "TEXT_VIEW_FACING" else 0.0,
+        ),
+        color=_msg("std_msgs/msg/ColorRGBA")(r=red, g=green, b=blue, a=alpha),
         lifetime=_msg("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
         frame_locked=False,
         points=points,
@@ -76,7 +110,7 @@ def _marker(wall_id: int, action: int, points: list[Any], stamp: float, frame: s
             header=_header(stamp, frame), format="", data=_empty_bytes()
         ),
         uv_coordinates=[],
-        text="",
+        text=text,
         mesh_resource="",
         mesh_file=_msg("visualization_msgs/msg/MeshFile")(filename="", data=_empty_bytes()),
         mesh_use_embedded_materials=False,
@@ -95,10 +129,74 @@ def markers(
     out = []
     for wall in walls:
         points = [_point(x, y) for seg in wall.segments for x, y in seg]
-        out.append(_marker(wall.id, marker_type.ADD, points, stamp, frame))
-    out += [_marker(wall_id, marker_type.DELETE, [], stamp, frame) for wall_id in deleted]
+        out.append(_marker(WALLS, wall.id, marker_type.ADD, points, stamp, frame))
+    out += [_marker(WALLS, wall_id, marker_type.DELETE, [], stamp, frame) for wall_id in deleted]
     message = _msg("visualization_msgs/msg/MarkerArray")(markers=out)
     return bytes(ros2_typestore().serialize_cdr(message, "visualization_msgs/msg/MarkerArray"))
+
+
+def room_markers(
+    rooms: dict[str, Any], deleted: dict[str, Iterable[int]], stamp: float, frame: str = "map"
+) -> bytes:
+    """The CDR of a MarkerArray of the rooms reply: outlines, labels and doors.
+
+    Each room an outline (``LINE_STRIP``, closed, namespace ``rooms``) and a label with its id
+    and area (``TEXT_VIEW_FACING``, ``room_labels``), each door a line across its opening
+    (``doors``); ids per namespace are the rooms' and doors' ids. ``deleted``: ids gone, by
+    namespace, each given a DELETE.
+    """
+    marker_type = _msg("visualization_msgs/msg/Marker")
+    add, delete = marker_type.ADD, marker_type.DELETE
+    out = []
+    for room in rooms["rooms"]:
+        ring = [_point(x, y) for x, y in [*room["polygon"], room["polygon"][0]]]
+        out.append(_marker(ROOMS, room["id"], add, ring, stamp, frame))
+        text = f"room {room['id']}: {room['area']:.1f} m²"
+        centre = (float(room["centroid"][0]), float(room["centroid"][1]))
+        out.append(_marker(ROOM_LABELS, room["id"], add, [], stamp, frame, centre, text))
+    for door in rooms["doors"]:
+        span = [_point(*door["p0"]), _point(*door["p1"])]
+        out.append(_marker(DOORS, door["id"], add, span, stamp, frame))
+    for look in (ROOMS, ROOM_LABELS, DOORS):
+        out += [_marker(look, i, delete, [], stamp, frame) for i in deleted.get(look.ns, ())]
+    message = _msg("visualization_msgs/msg/MarkerArray")(markers=out)
+    return bytes(ros2_typestore().serialize_cdr(message, "visualization_msgs/msg/MarkerArray"))
+
+
+class RoomMarkers:
+    """``{prefix}/rooms/markers``: the rooms' MarkerArray, and the latest for late subscribers.
+
+    Ids of rooms and doors no longer served get one DELETE, as walls do.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Keys, frame: str = "map") -> None:
+        self._frame, self._key = frame, keys.room_markers
+        self._shown: dict[str, set[int]] = {}
+        self._latest: bytes | None = None
+        self._publisher = session.declare_publisher(self._key)
+        self._queryable = session.declare_queryable(self._key, self._answer)
+
+    def _answer(self, query: zenoh.Query) -> None:  # Zenoh's thread: reply to this query only
+        latest = self._latest
+        if latest is not None:
+            query.reply(query.key_expr, latest)
+
+    def publish(self, rooms: dict[str, Any]) -> None:
+        """The rooms reply as markers."""
+        now = {
+            ROOMS.ns: {r["id"] for r in rooms["rooms"]},
+            ROOM_LABELS.ns: {r["id"] for r in rooms["rooms"]},
+            DOORS.ns: {d["id"] for d in rooms["doors"]},
+        }
+        gone = {ns: sorted(self._shown.get(ns, set()) - ids) for ns, ids in now.items()}
+        self._shown = now
+        self._latest = room_markers(rooms, gone, rooms.get("stamp") or 0.0, self._frame)
+        self._publisher.put(self._latest)
+
+    def undeclare(self) -> None:
+        """End the queryable and the publisher."""
+        self._queryable.undeclare()
+        self._publisher.undeclare()
 
 
 def path(trajectory: Sequence[Sequence[float]], stamp: float, frame: str = "map") -> bytes:

@@ -217,7 +217,7 @@ def run(
             _missed(stats, "observations"),
         )  # fmt: skip
         queryable = session.declare_queryable(keys.map_walls)
-        rooms = RoomsServer(session, keys, core.lock, core.mapping, stats)
+        rooms = RoomsServer(session, keys, core.lock, core.mapping, stats, mapper.ros2_out)
         workers = [
             threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
             threading.Thread(target=_updates, args=(core, updates, stop, ros2), daemon=True),

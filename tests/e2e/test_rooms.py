@@ -13,7 +13,9 @@ import pytest
 from conftest import run_wallmap
 
 from wallmap.common.grid_labels import inside_polygon
+from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.scene import load_truth
+from wallmap.services.mapper import ros2_out
 
 pytestmark = pytest.mark.e2e
 
@@ -90,3 +92,9 @@ def test_query_plot_and_export_show_the_live_mappers_rooms(stack, strip, tmp_pat
     assert [f["geometry"]["type"] for f in doors] == ["LineString"] * 2
     ring = polygons[0]["geometry"]["coordinates"][0]
     assert ring[0] == ring[-1], "a closed ring"
+    # ROS 2 out: the rooms' markers, held for a late subscriber as a transient-local topic.
+    with open_session(ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)) as session:
+        replies = list(session.get(Keys(stack.prefix).room_markers, timeout=5.0))
+    array = ros2_out.decode(replies[0].ok.payload.to_bytes(), "visualization_msgs/msg/MarkerArray")
+    assert sorted({m.ns for m in array.markers}) == ["doors", "room_labels", "rooms"]
+    assert sum(m.ns == "rooms" for m in array.markers) == 3

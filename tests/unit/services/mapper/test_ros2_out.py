@@ -51,3 +51,28 @@ def test_the_path_goes_through_the_keyframes() -> None:
     last = path.poses[1].pose
     assert (last.position.x, last.position.y) == (1.0, 2.0)
     assert abs(2 * np.arctan2(last.orientation.z, last.orientation.w) - 1.2) < 1e-9
+
+
+def test_rooms_are_outlines_labels_and_doors_in_their_namespaces() -> None:
+    rooms = {
+        "stamp": 3.5,
+        "rooms": [
+            {"id": 2, "polygon": [[0, 0], [4, 0], [4, 3], [0, 3]], "area": 12.0,
+             "centroid": [2.0, 1.5], "walls": [1], "doors": [0], "closed": True},
+        ],
+        "doors": [{"id": 0, "center": [4.0, 1.5], "width": 0.9, "p0": [4.0, 1.05],
+                   "p1": [4.0, 1.95], "wall": 1, "rooms": [2]}],
+    }  # fmt: skip
+    array = ros2_out.decode(ros2_out.room_markers(rooms, {"doors": [7]}, 3.5, "map"), MARKERS)
+    outline, label, door, gone = array.markers
+    assert (outline.ns, outline.id, outline.type) == ("rooms", 2, outline.LINE_STRIP)
+    assert [(p.x, p.y) for p in outline.points] == [(0, 0), (4, 0), (4, 3), (0, 3), (0, 0)]
+    assert (label.ns, label.type, label.text) == (
+        "room_labels",
+        label.TEXT_VIEW_FACING,
+        "room 2: 12.0 m²",
+    )
+    assert (label.pose.position.x, label.pose.position.y) == (2.0, 1.5)
+    assert (door.ns, door.id, door.type) == ("doors", 0, door.LINE_LIST)
+    assert [(p.x, p.y) for p in door.points] == [(4.0, 1.05), (4.0, 1.95)]
+    assert (gone.ns, gone.id, gone.action) == ("doors", 7, gone.DELETE)
