@@ -132,31 +132,50 @@ class Layout:
     doors: list[DoorShape]
 
 
-def _free_ends(walls: Sequence[WallSegments], joint: float) -> tuple[list[_End], Array, Array]:
-    """The segment ends not joined to another wall, and every segment's ends (a, b)."""
-    pieces = [
-        (w.id, s) for w in walls for s in np.asarray(w.segments, dtype=float).reshape(-1, 2, 2)
-    ]
-    a = np.array([s[0] for _, s in pieces]).reshape(-1, 2)
-    b = np.array([s[1] for _, s in pieces]).reshape(-1, 2)
-    ends = []
-    for k, (wall, seg) in enumerate(pieces):
-        for end, other in ((seg[0], seg[1]), (seg[1], seg[0])):
-            outward = end - other
-            norm = float(np.hypot(*outward))
-            if len(pieces) > 1 and norm > 1e-9 and _distance_to_others(end, a, b, k) >= joint:
-                ends.append(_End(wall, k, end.copy(), outward / norm))
-    return ends, a, b
-
-
 @dataclass(frozen=True)
-class _End:
-    """A segment's end that no other wall meets: where an opening may start."""
+class _Ends:
+    """The segment ends no other wall meets (where openings may start), and all segments."""
 
-    wall: int
-    piece: int
-    point: Array
-    outward: Array
+    wall: NDArray[np.int64]  # (e,) the wall of each end
+    piece: NDArray[np.int64]  # (e,) its segment, an index into a and b
+    point: Array  # (e, 2)
+    outward: Array  # (e, 2) unit: the way its segment would go on
+    a: Array  # (s, 2) every segment's first end
+    b: Array  # (s, 2) ...and second
+
+
+def _feet(points: Array, a: Array, b: Array) -> Array:
+    """Each point's nearest point on each segment: (n, s, 2)."""
+    seg = b - a
+    length2 = np.maximum((seg**2).sum(axis=1), 1e-12)
+    t = np.clip(np.einsum("nsk,sk->ns", points[:, None, :] - a[None], seg) / length2, 0.0, 1.0)
+    return a[None] + t[..., None] * seg[None]
+
+
+def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
+    """The ends of every segment not within ``joint`` of another segment (a corner, a T)."""
+    segments = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
+    owners = np.concatenate([[w.id] * len(s) for w, s in zip(walls, segments, strict=True)] + [[]])
+    pieces = np.concatenate(segments) if segments else np.zeros((0, 2, 2))
+    a, b = pieces[:, 0], pieces[:, 1]
+    point = np.concatenate([a, b])
+    outward = np.concatenate([a - b, b - a])
+    piece = np.tile(np.arange(len(a)), 2)
+    norm = np.hypot(outward[:, 0], outward[:, 1])
+    if len(a) < 2:
+        keep = np.zeros(len(point), dtype=bool)
+    else:
+        gap = np.hypot(*(_feet(point, a, b) - point[:, None]).transpose(2, 0, 1))
+        gap[np.arange(len(point)), piece] = np.inf
+        keep = (norm > 1e-9) & (gap.min(axis=1) >= joint)
+    return _Ends(
+        wall=owners.astype(np.int64)[piece[keep]],
+        piece=piece[keep],
+        point=point[keep],
+        outward=outward[keep] / norm[keep, None],
+        a=a,
+        b=b,
+    )
 
 
 def openings(
@@ -170,46 +189,47 @@ def openings(
     ``reach`` and ``angle``: how far and how far off its wall's direction to look (the
     configuration's door width and angle unless given).
     """
-    ends, a, b = _free_ends(walls, config.joint)
+    ends = _free_ends(walls, config.joint)
     reach = config.door_max if reach is None else reach
     cos_max = math.cos(math.radians(config.door_angle if angle is None else angle))
+    targets = _nearest_ahead(ends, reach, cos_max)
     found: dict[tuple[float, ...], Opening] = {}
-    for end in ends:
-        target = _nearest_ahead(end.point, end.outward, a, b, end.piece, reach, cos_max)
-        if target is None or _crosses_walls(end.point, target, a, b, end.piece):
+    for k in np.flatnonzero(np.isfinite(targets[:, 0])).tolist():
+        point, target = ends.point[k], targets[k]
+        if _crosses_walls(point, target, ends.a, ends.b, int(ends.piece[k])):
             continue
-        key = tuple(np.round(np.concatenate(sorted([end.point, target], key=tuple)), 2).tolist())
-        found.setdefault(key, Opening(end.wall, end.point, target))
+        key = tuple(np.round(np.concatenate(sorted([point, target], key=tuple)), 2).tolist())
+        found.setdefault(key, Opening(int(ends.wall[k]), point.copy(), target))
     return list(found.values())
 
 
-def _distance_to_others(point: Array, a: Array, b: Array, own: int) -> float:
-    """Distance from ``point`` to the nearest segment a-b other than ``own``."""
-    seg = b - a
-    t = np.clip(((point - a) * seg).sum(axis=1) / np.maximum((seg**2).sum(axis=1), 1e-12), 0, 1)
-    dist = np.hypot(*(a + t[:, None] * seg - point).T)
-    dist[own] = np.inf
-    return float(dist.min())
+def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
+    """Per end, the nearest point of another segment ahead of it; NaN where none.
 
-
-def _nearest_ahead(
-    end: Array, direction: Array, a: Array, b: Array, own: int, reach: float, cos_max: float
-) -> Array | None:
-    """The nearest point of another segment (its ends, or the foot on it) ahead of ``end``."""
-    seg = b - a
-    length2 = np.maximum((seg**2).sum(axis=1), 1e-12)
-    t = np.clip(((end - a) * seg).sum(axis=1) / length2, 0.0, 1.0)
-    feet = a + t[:, None] * seg
-    points = np.concatenate([a, b, feet])
+    A segment's ends or the foot on it, within ``reach``, at most ``acos(cos_max)`` off the
+    end's outward direction.
+    """
+    a, b = ends.a, ends.b
+    n = len(ends.point)
+    if not n:
+        return np.zeros((0, 2))
+    feet = _feet(ends.point, a, b)  # (n, s, 2)
+    points = np.concatenate(
+        [np.broadcast_to(a, feet.shape), np.broadcast_to(b, feet.shape), feet], axis=1
+    )
     owner = np.tile(np.arange(len(a)), 3)
-    rel = points - end
-    dist = np.hypot(rel[:, 0], rel[:, 1])
+    rel = points - ends.point[:, None]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        cosine = (rel @ direction) / dist
-    ok = (owner != own) & (dist > 1e-6) & (dist <= reach) & (cosine >= cos_max)
-    if not ok.any():
-        return None
-    return points[np.flatnonzero(ok)[np.argmin(dist[ok])]]
+        cosine = np.einsum("nmk,nk->nm", rel, ends.outward) / dist
+    ok = (
+        (owner[None] != ends.piece[:, None]) & (dist > 1e-6) & (dist <= reach) & (cosine >= cos_max)
+    )
+    dist = np.where(ok, dist, np.inf)
+    best = np.argmin(dist, axis=1)
+    out = points[np.arange(n), best].copy()
+    out[~ok.any(axis=1)] = np.nan
+    return out
 
 
 def _crosses_walls(p: Array, q: Array, a: Array, b: Array, own: int) -> bool:
@@ -295,7 +315,10 @@ def find_rooms(
         if not closed:
             _fill_open(grid, labels, barrier, k)
     _grow(labels, barrier, math.ceil(radius / grid.cell))
-    shapes = [_shape(grid, labels == k, closed, config) for k, closed in enumerate(rooms)]
+    shapes = [
+        _shape(grid, cells, closed, config)
+        for cells, closed in zip(_cells_of(labels, len(rooms)), rooms, strict=True)
+    ]
     _bounding_walls(grid, labels, walls, shapes, radius)
     doors = [
         door
@@ -395,17 +418,32 @@ def _grow(labels: NDArray[np.int32], barrier: NDArray[np.bool_], steps: int) -> 
             labels[take] = moved[take]
 
 
-def _shape(grid: _Grid, cells: NDArray[np.bool_], closed: bool, config: RoomsConfig) -> RoomShape:
-    """A room's outline (map frame, counter-clockwise), area and centroid from its cells."""
-    corners = outline(cells)
+def _cells_of(labels: NDArray[np.int32], n: int) -> list[NDArray[np.int64]]:
+    """Each room's cells (local (i, j)), from one pass over the grid."""
+    ii, jj = np.nonzero(labels >= 0)
+    room = labels[ii, jj]
+    order = np.argsort(room, kind="stable")
+    bounds = np.searchsorted(room[order], np.arange(n + 1))
+    cells = np.stack([ii, jj], axis=1)[order]
+    return [cells[bounds[k] : bounds[k + 1]] for k in range(n)]
+
+
+def _shape(grid: _Grid, cells: NDArray[np.int64], closed: bool, config: RoomsConfig) -> RoomShape:
+    """A room's outline (map frame, counter-clockwise), area and centroid from its cells.
+
+    Outlined on the room's own box of the grid, not the whole: a building has many rooms.
+    """
+    low = cells.min(axis=0)
+    box = np.zeros(tuple(cells.max(axis=0) - low + 1), dtype=bool)
+    box[cells[:, 0] - low[0], cells[:, 1] - low[1]] = True
+    corners = outline(box) + low
     polygon = simplify((corners + grid.origin) * grid.cell, config.simplify)
-    ii, jj = np.nonzero(cells)
     return RoomShape(
         polygon=polygon,
         area=abs(polygon_area(polygon)),
         centroid=polygon_centroid(polygon),
         closed=closed,
-        cells=np.stack([ii, jj], axis=1) + grid.origin,
+        cells=cells + grid.origin,
     )
 
 

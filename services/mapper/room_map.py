@@ -47,9 +47,14 @@ class DoorRecord:
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
         return {
-            "id": self.id, "center": list(self.center), "width": self.width,
-            "p0": list(self.p0), "p1": list(self.p1), "wall": self.wall, "rooms": list(self.rooms),
-        }  # fmt: skip
+            "id": self.id,
+            "center": list(self.center),
+            "width": self.width,
+            "p0": list(self.p0),
+            "p1": list(self.p1),
+            "wall": self.wall,
+            "rooms": list(self.rooms),
+        }
 
 
 @dataclass(frozen=True)
@@ -67,10 +72,14 @@ class RoomRecord:
     def to_map(self) -> dict[str, Any]:
         """Plain map for encoding."""
         return {
-            "id": self.id, "polygon": [list(p) for p in self.polygon], "area": self.area,
-            "centroid": list(self.centroid), "walls": list(self.walls), "doors": list(self.doors),
+            "id": self.id,
+            "polygon": [list(p) for p in self.polygon],
+            "area": self.area,
+            "centroid": list(self.centroid),
+            "walls": list(self.walls),
+            "doors": list(self.doors),
             "closed": self.closed,
-        }  # fmt: skip
+        }
 
 
 @dataclass(frozen=True)
@@ -103,6 +112,17 @@ class _Kept:
 def _keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     """Cells (i, j) as single sortable integers."""
     return np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
+
+
+def _greedy(pairs: list[tuple[float, int, int]]) -> dict[int, int]:
+    """New index -> old id, taking ``(score, new, old)`` pairs in order, each side once."""
+    ids: dict[int, int] = {}
+    taken: set[int] = set()
+    for _, new, old in pairs:
+        if new not in ids and old not in taken:
+            ids[new] = old
+            taken.add(old)
+    return ids
 
 
 def _pt(p: Array) -> tuple[float, float]:
@@ -199,17 +219,23 @@ class RoomMap:
     def _room_ids(self, rooms: list[RoomShape]) -> list[int]:
         """Each new room's id: the old room it overlaps most, else a new one."""
         keys = [_keys(r.cells) for r in rooms]
+        old_keys = np.concatenate([k.keys for k in self.kept] + [np.zeros(0, dtype=np.int64)])
+        old_ids = np.concatenate(
+            [np.full(len(k.keys), k.id) for k in self.kept] + [np.zeros(0, dtype=np.int64)]
+        )
+        order = np.argsort(old_keys)
+        old_keys, old_ids = old_keys[order], old_ids[order]
+        sizes = {k.id: len(k.keys) for k in self.kept}
         pairs = []
         for k, mine in enumerate(keys):
-            for old in self.kept:
-                shared = len(np.intersect1d(mine, old.keys, assume_unique=True))
-                if shared >= KEEP_SHARE * min(len(mine), len(old.keys)) and shared:
-                    pairs.append((shared, k, old.id))
-        ids: dict[int, int] = {}
-        taken: set[int] = set()
-        for _, k, old_id in sorted(pairs, reverse=True):
-            if k not in ids and old_id not in taken:
-                ids[k], _ = old_id, taken.add(old_id)
+            if not len(old_keys):
+                break
+            at = np.clip(np.searchsorted(old_keys, mine), 0, len(old_keys) - 1)
+            owners, shared = np.unique(old_ids[at[old_keys[at] == mine]], return_counts=True)
+            for old_id, count in zip(owners.tolist(), shared.tolist(), strict=True):
+                if count >= KEEP_SHARE * min(len(mine), sizes[old_id]):
+                    pairs.append((count, k, old_id))
+        ids = _greedy(sorted(pairs, reverse=True))
         for k in range(len(rooms)):
             if k not in ids:
                 ids[k], self.next_room = self.next_room, self.next_room + 1
@@ -218,18 +244,13 @@ class RoomMap:
 
     def _door_ids(self, doors: list[DoorShape]) -> list[int]:
         """Each new door's id: an old door's near its centre, else a new one."""
-        centres = [(d.p0 + d.p1) / 2 for d in doors]
-        pairs = sorted(
-            (float(np.hypot(*(c - old))), k, old_id)
-            for k, c in enumerate(centres)
-            for old_id, old in self.doors.items()
-            if np.hypot(*(c - old)) <= DOOR_REACH
-        )
-        ids: dict[int, int] = {}
-        taken: set[int] = set()
-        for _, k, old_id in pairs:
-            if k not in ids and old_id not in taken:
-                ids[k], _ = old_id, taken.add(old_id)
+        centres = np.array([(d.p0 + d.p1) / 2 for d in doors]).reshape(-1, 2)
+        old_ids = list(self.doors)
+        old = np.array([self.doors[i] for i in old_ids]).reshape(-1, 2)
+        gaps = np.hypot(*(centres[:, None] - old[None]).transpose(2, 0, 1))
+        near = np.argwhere(gaps <= DOOR_REACH)
+        pairs = sorted((float(gaps[k, m]), int(k), old_ids[m]) for k, m in near.tolist())
+        ids = _greedy(pairs)
         for k in range(len(doors)):
             if k not in ids:
                 ids[k], self.next_door = self.next_door, self.next_door + 1

@@ -14,11 +14,17 @@ from wallmap.services.mapper.room_map import RoomMap
 def _records(plan) -> tuple[WallRecord, ...]:
     return tuple(
         WallRecord(
-            id=w.id, u=0.0, v=0.0, cov=((1e-4, 0.0), (0.0, 1e-4)), p0=w.p0, p1=w.p1,
-            segments=((w.p0, w.p1),), n_obs=10,
+            id=w.id,
+            u=0.0,
+            v=0.0,
+            cov=((1e-4, 0.0), (0.0, 1e-4)),
+            p0=w.p0,
+            p1=w.p1,
+            segments=((w.p0, w.p1),),
+            n_obs=10,
         )
         for w in plan.walls
-    )  # fmt: skip
+    )
 
 
 def _drive(rooms: RoomMap, plan, route: np.ndarray) -> None:

@@ -57,12 +57,28 @@ def test_rooms_are_outlines_labels_and_doors_in_their_namespaces() -> None:
     rooms = {
         "stamp": 3.5,
         "rooms": [
-            {"id": 2, "polygon": [[0, 0], [4, 0], [4, 3], [0, 3]], "area": 12.0,
-             "centroid": [2.0, 1.5], "walls": [1], "doors": [0], "closed": True},
+            {
+                "id": 2,
+                "polygon": [[0, 0], [4, 0], [4, 3], [0, 3]],
+                "area": 12.0,
+                "centroid": [2.0, 1.5],
+                "walls": [1],
+                "doors": [0],
+                "closed": True,
+            },
         ],
-        "doors": [{"id": 0, "center": [4.0, 1.5], "width": 0.9, "p0": [4.0, 1.05],
-                   "p1": [4.0, 1.95], "wall": 1, "rooms": [2]}],
-    }  # fmt: skip
+        "doors": [
+            {
+                "id": 0,
+                "center": [4.0, 1.5],
+                "width": 0.9,
+                "p0": [4.0, 1.05],
+                "p1": [4.0, 1.95],
+                "wall": 1,
+                "rooms": [2],
+            }
+        ],
+    }
     array = ros2_out.decode(ros2_out.room_markers(rooms, {"doors": [7]}, 3.5, "map"), MARKERS)
     outline, label, door, gone = array.markers
     assert (outline.ns, outline.id, outline.type) == ("rooms", 2, outline.LINE_STRIP)

@@ -1,0 +1,170 @@
+"""Rooms and doors: found against the truth of generated buildings, and what an update costs.
+
+Part 1: strips of three rooms joined by doorways (``generate_floorplan``, glass in some outer
+walls, furniture below the band), written as 320x240 depth bags, mapped offline with tf poses
+(``wallmap.offline``, the services' code) and segmented as the mapper serves them. Rooms are
+matched one to one with the truth by IoU of their outlines (rasterised at 5 cm); doors by their
+centres. Part 2: one update (draw nothing new, segment, give ids) of a building of 10 x 10
+rooms of 4 x 4 m off corridors, from its true walls and the floor seen along a route through
+every room, median of 5; the issue's target is 100 rooms within 20 ms.
+
+    .venv/bin/python benchmarks/rooms.py [--seeds 4] [--frames 900]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from wallmap.common.grid_labels import inside_polygon
+from wallmap.common.map_records import WallRecord
+from wallmap.offline import rooms, run_bag
+from wallmap.scene import Camera, load_truth, write_scene_bag
+from wallmap.scene.floorplan import FloorPlan, Wall, free_rays
+from wallmap.services.mapper.room_map import RoomMap
+
+
+def iou(a: np.ndarray, b: np.ndarray, step: float = 0.05) -> float:
+    """Intersection over union of two polygons, on a grid of ``step``."""
+    both = np.concatenate([a, b])
+    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
+    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    in_a, in_b = inside_polygon(grid, a), inside_polygon(grid, b)
+    return float((in_a & in_b).sum() / max((in_a | in_b).sum(), 1))
+
+
+def score(seed: int, frames: int, folder: Path) -> dict[str, float]:
+    """One strip mapped and segmented, against its truth."""
+    bag = folder / f"strip{seed}.bag"
+    write_scene_bag(
+        bag,
+        seed=seed,
+        n_frames=frames,
+        fmt="ros1",
+        sensor="depth16",
+        camera=Camera(width=320, height=240),
+    )
+    plan = load_truth(Path(f"{bag}.truth.json"))[0]
+    reply = rooms(run_bag(bag))
+    pairs = sorted(
+        (
+            (iou(np.array(r.polygon), np.array(t.polygon)), r.id, t.id)
+            for r in reply.rooms
+            for t in plan.rooms
+        ),
+        reverse=True,
+    )
+    matched: dict[int, int] = {}
+    ious = []
+    for value, mine, theirs in pairs:
+        if value > 0.3 and mine not in matched and theirs not in matched.values():
+            matched[mine] = theirs
+            ious.append(value)
+    centre_err, width_err, joined = [], [], 0
+    for door in plan.doors:
+        centre = np.add(door.p0, door.p1) / 2
+        near = [d for d in reply.doors if np.hypot(*(np.array(d.center) - centre)) < 0.5]
+        if near:
+            found = near[0]
+            centre_err.append(float(np.hypot(*(np.array(found.center) - centre))))
+            width_err.append(abs(found.width - float(np.hypot(*np.subtract(door.p1, door.p0)))))
+            joined += sorted(matched.get(r, -1) for r in found.rooms) == sorted(door.rooms)
+    return {
+        "rooms": len(reply.rooms),
+        "truth": len(plan.rooms),
+        "matched": len(matched),
+        "iou_min": min(ious, default=0.0),
+        "iou_median": statistics.median(ious or [0.0]),
+        "doors": len(reply.doors),
+        "door_truth": len(plan.doors),
+        "doors_found": len(centre_err),
+        "joined": joined,
+        "centre": max(centre_err, default=0.0),
+        "width": max(width_err, default=0.0),
+    }
+
+
+def grid_building(n: int = 10, size: float = 4.0, door: float = 0.9) -> FloorPlan:
+    """n x n rooms of ``size`` m, each with a door in its south and west wall (the outer ones
+    closed), and a route through every room."""
+    walls: list[Wall] = []
+    wall_id = 0
+    for k in range(n + 1):
+        for m in range(n):
+            for horizontal in (True, False):
+                a = (m * size, k * size) if horizontal else (k * size, m * size)
+                b = ((m + 1) * size, k * size) if horizontal else (k * size, (m + 1) * size)
+                if 0 < k < n:  # an inner wall: a door in its middle
+                    mid = np.add(a, b) / 2
+                    along = np.subtract(b, a) / size
+                    walls.append(Wall(wall_id, a, tuple(mid - along * door / 2)))
+                    walls.append(Wall(wall_id + 1, tuple(mid + along * door / 2), b))
+                    wall_id += 2
+                else:
+                    walls.append(Wall(wall_id, a, b))
+                    wall_id += 1
+    route = [
+        ((m + 0.5) * size, (k + 0.5) * size)
+        for k in range(n)
+        for m in (range(n) if k % 2 == 0 else reversed(range(n)))
+    ]
+    return FloorPlan(walls=tuple(walls), route=tuple(route))
+
+
+def update_cost(n: int = 10, rounds: int = 5) -> tuple[int, int, float]:
+    """Rooms and doors of the grid building, and the median seconds of one update."""
+    plan = grid_building(n)
+    records = tuple(
+        WallRecord(w.id, 0.0, 0.0, ((1e-4, 0.0), (0.0, 1e-4)), w.p0, w.p1, ((w.p0, w.p1),), 10)
+        for w in plan.walls
+    )
+    room_map = RoomMap()
+    route = np.array(plan.route)
+    for a, b in itertools.pairwise(route):
+        for t in np.linspace(0.0, 1.0, 12, endpoint=False):
+            at = a + t * (b - a)
+            room_map.add_frame(np.array([*at, 0.0]), np.zeros(2), free_rays(plan, at))
+    reply = room_map.update(records, 0.0)
+    times = []
+    for _ in range(rounds):
+        started = time.perf_counter()
+        room_map.update(records, 0.0)
+        times.append(time.perf_counter() - started)
+    return len(reply.rooms), len(reply.doors), statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--frames", type=int, default=900)
+    args = parser.parse_args()
+    print(
+        "| seed | rooms / truth | matched | IoU min | IoU median | doors / truth | "
+        "found | rooms joined right | centre err max m | width err max m |"
+    )
+    print("|---:|---|---:|---:|---:|---|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(args.seeds):
+            s = score(seed, args.frames, Path(tmp))
+            print(
+                f"| {seed} | {s['rooms']} / {s['truth']} | {s['matched']} | {s['iou_min']:.3f} | "
+                f"{s['iou_median']:.3f} | {s['doors']} / {s['door_truth']} | {s['doors_found']} | "
+                f"{s['joined']} | {s['centre']:.3f} | {s['width']:.3f} |",
+                flush=True,
+            )
+    found_rooms, found_doors, seconds = update_cost()
+    print(
+        f"\nupdate of a 10 x 10 grid building: {found_rooms} rooms, {found_doors} doors, "
+        f"median {seconds * 1e3:.1f} ms (target: 100 rooms within 20 ms)"
+    )
+
+
+if __name__ == "__main__":
+    main()
