@@ -375,7 +375,8 @@ def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_
     """An open room's unseen floor within the hull of its seen floor and the walls it faces.
 
     Glass returns nothing, so the floor before it is never seen: the room's walls and seen
-    floor still span it. Only cells of no room and no barrier are taken.
+    floor still span it. Only cells of no room and no barrier are taken, and only those the
+    room's own cells reach within the hull without crossing a barrier.
     """
     mine = labels == k
     near = barrier & _dilate(mine, 2)
@@ -388,7 +389,13 @@ def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_
     inside = inside_polygon(np.stack([bi.ravel(), bj.ravel()], axis=1) + 0.0, hull).reshape(
         bi.shape
     )
-    take = inside & (labels[bi, bj] < 0) & ~barrier[bi, bj]
+    box_labels = labels[bi, bj]
+    open_floor = inside & ((box_labels < 0) | (box_labels == k)) & ~barrier[bi, bj]
+    # Only what the room reaches within its hull without crossing a wall: not the space
+    # behind one of its walls that the hull happens to span.
+    parts, _ = label(open_floor)
+    reached = np.unique(parts[(box_labels == k) & (parts >= 0)])
+    take = np.isin(parts, reached) & (box_labels < 0)
     labels[bi[take], bj[take]] = k
 
 

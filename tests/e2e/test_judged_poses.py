@@ -85,6 +85,28 @@ def test_the_jackal_arena_maps_as_six_walls(tmp_path: Path, label: str, flags) -
     assert found["frames_corrected"] >= 0.7 * scans
     if "--odometry" in flags:
         assert found["latency_fixed"]  # scan matching poses its own frames: latency 0
+    # The arena is one L-shaped room: one closed room, no door, of the walls' area.
+    rooms = reply["rooms"]
+    assert len(rooms["rooms"]) == 1
+    assert rooms["doors"] == []
+    (room,) = rooms["rooms"]
+    assert room["closed"]
+    assert room["area"] == pytest.approx(_area_walled(reply["walls"]), rel=0.05)
+
+
+def _area_walled(walls: list[dict]) -> float:
+    """The area of the polygon the walls' ends chain into (each end meets the next wall's)."""
+    left = [np.array([w["p0"], w["p1"]]) for w in walls if not w.get("tentative")]
+    chain = [left[0][0], left[0][1]]
+    left = left[1:]
+    while left:
+        k, end = min(
+            ((k, e) for k, w in enumerate(left) for e in (0, 1)),
+            key=lambda ke: np.hypot(*(left[ke[0]][ke[1]] - chain[-1])),
+        )
+        chain.append(left.pop(k)[1 - end])
+    x, y = np.array(chain).T
+    return abs(0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
 def test_a_late_noisy_glitching_tum_file_still_maps_the_scene(tmp_path: Path) -> None:
