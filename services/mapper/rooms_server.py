@@ -23,7 +23,8 @@ from wallmap.services.mapper.room_map import RoomsReply
 from wallmap.services.mapper.ros2_out import RoomMarkers
 from wallmap.services.pipeline import Mapping
 
-ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map
+ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map, at least
+BUSY_SHARE = 10.0  # ...and this many times the last one's duration
 
 
 class RoomsServer:
@@ -66,7 +67,9 @@ class RoomsServer:
             self._markers.undeclare()
 
     def _keep_current(self, stop: threading.Event) -> None:
-        while not stop.wait(ROOMS_PERIOD):
+        # A big building takes a while to segment: at most a tenth of the time is spent on it,
+        # so the frames, which share the interpreter, keep going.
+        while not stop.wait(max(ROOMS_PERIOD, BUSY_SHARE * self._mapping.rooms.seconds)):
             self._refresh()
 
     def _refresh(self) -> None:
