@@ -1,7 +1,8 @@
 """Rooms and doors: found against the truth of generated buildings, and what an update costs.
 
-Part 1: strips of three rooms joined by doorways (``generate_floorplan``, glass in some outer
-walls, furniture below the band), written as 320x240 depth bags, mapped offline with tf poses
+Part 1: strips of three rooms joined by doorways, and kinked corridors with small rooms behind
+some of their doors (``generate_floorplan``, glass in some walls, furniture below the band;
+the corridor's robot stays in the corridor, so the IoU columns are of the rooms entered), written as 320x240 depth bags, mapped offline with tf poses
 (``wallmap.offline``, the services' code) and segmented as the mapper serves them. Rooms are
 matched one to one with the truth by IoU of their outlines (rasterised at 5 cm); doors by their
 centres. Part 2: one update (draw nothing new, segment, give ids) of a building of 10 x 10
@@ -26,7 +27,7 @@ from wallmap.common.grid_labels import inside_polygon
 from wallmap.common.map_records import WallRecord
 from wallmap.offline import rooms, run_bag
 from wallmap.scene import Camera, load_truth, write_scene_bag
-from wallmap.scene.floorplan import FloorPlan, Wall, free_rays
+from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan
 from wallmap.services.mapper.room_map import RoomMap
 
 
@@ -40,9 +41,9 @@ def iou(a: np.ndarray, b: np.ndarray, step: float = 0.05) -> float:
     return float((in_a & in_b).sum() / max((in_a | in_b).sum(), 1))
 
 
-def score(seed: int, frames: int, folder: Path) -> dict[str, float]:
-    """One strip mapped and segmented, against its truth."""
-    bag = folder / f"strip{seed}.bag"
+def score(seed: int, frames: int, folder: Path, layout: str) -> dict[str, float]:
+    """One building mapped and segmented, against its truth."""
+    bag = folder / f"{layout}{seed}.bag"
     write_scene_bag(
         bag,
         seed=seed,
@@ -50,6 +51,7 @@ def score(seed: int, frames: int, folder: Path) -> dict[str, float]:
         fmt="ros1",
         sensor="depth16",
         camera=Camera(width=320, height=240),
+        plan=generate_floorplan(seed, layout=layout),
     )
     plan = load_truth(Path(f"{bag}.truth.json"))[0]
     reply = rooms(run_bag(bag))
@@ -63,10 +65,12 @@ def score(seed: int, frames: int, folder: Path) -> dict[str, float]:
     )
     matched: dict[int, int] = {}
     ious = []
-    for value, mine, theirs in pairs:
+    entered = {t.id for t in plan.rooms} if layout == "rooms" else {0}  # a corridor's robot
+    for value, mine, theirs in pairs:  # stays in the corridor: its side rooms are glimpses
         if value > 0.3 and mine not in matched and theirs not in matched.values():
             matched[mine] = theirs
-            ious.append(value)
+            if theirs in entered:
+                ious.append(value)
     centre_err, width_err, joined = [], [], 0
     for door in plan.doors:
         centre = np.add(door.p0, door.p1) / 2
@@ -146,15 +150,16 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=900)
     args = parser.parse_args()
     print(
-        "| seed | rooms / truth | matched | IoU min | IoU median | doors / truth | "
-        "found | rooms joined right | centre err max m | width err max m |"
+        "| building | seed | rooms / truth | matched | entered found | IoU min | IoU median | "
+        "doors / truth | found | rooms joined right | centre err max m | width err max m |"
     )
-    print("|---:|---|---:|---:|---:|---|---:|---:|---:|---:|")
+    print("|---|---:|---|---:|---|---:|---:|---|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(args.seeds):
-            s = score(seed, args.frames, Path(tmp))
+        for layout, seed in [(k, n) for k in ("rooms", "corridor") for n in range(args.seeds)]:
+            s = score(seed, args.frames, Path(tmp), layout)
             print(
-                f"| {seed} | {s['rooms']} / {s['truth']} | {s['matched']} | {s['iou_min']:.3f} | "
+                f"| {layout} | {seed} | {s['rooms']} / {s['truth']} | {s['matched']} | "
+                f"{s['entered']} / {s['entered_truth']} | {s['iou_min']:.3f} | "
                 f"{s['iou_median']:.3f} | {s['doors']} / {s['door_truth']} | {s['doors_found']} | "
                 f"{s['joined']} | {s['centre']:.3f} | {s['width']:.3f} |",
                 flush=True,

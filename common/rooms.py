@@ -12,7 +12,8 @@ on a grid of ``FreeSpace``'s cells:
    split into 4-connected regions. A region that does not reach the grid's edge is enclosed:
    it is a room, ``closed``, and its floor is all of it (corners the sensor never saw
    included). A region reaching the edge leaks to unexplored space: its seen floor, in
-   connected pieces, makes rooms that are not closed. Pieces under ``min_area`` are dropped.
+   connected pieces, makes rooms that are not closed. Rooms under ``min_area`` are dropped,
+   open ones under ``min_open_area`` (a glimpse through a door into the space beyond).
 3. **Doors.** A door candidate is a door when the robot or its rays crossed it (its cells
    are seen free) and it joins two different rooms, or a room and unexplored space. One
    never seen through (glass, a dark niche) stays wall; one with the same room both sides is
@@ -59,6 +60,7 @@ class RoomsConfig:
         joint: an end this near (m) another wall is joined to it (a corner, a T): no opening.
         barrier: half thickness (m) of walls and openings while the floor is divided.
         min_area: smallest room (m^2).
+        min_open_area: smallest room not closed (m^2): less is a glimpse through a door.
         simplify: how far (m) an outline may stray from its cells.
         blind_max: longest span (m) closed as an unseen wall (glass) where nothing crossed it.
         blind_angle: how far (deg) such a span may turn from its wall's direction.
@@ -71,6 +73,7 @@ class RoomsConfig:
     joint: float = 0.2
     barrier: float = 0.1
     min_area: float = 1.0
+    min_open_area: float = 2.5
     simplify: float = 0.12
     blind_max: float = 8.0
     blind_angle: float = 60.0
@@ -357,18 +360,20 @@ def _regions(
     leaky = touches_border(regions, n)
     min_cells = config.min_area / grid.cell**2
     seen = np.bincount(regions[grid.free & (regions >= 0)], minlength=n)
-    labels = np.full(grid.shape, -1, dtype=np.int32)
-    closed: list[bool] = []
-    for k in np.flatnonzero((seen >= min_cells) & ~leaky).tolist():
-        labels[regions == k] = len(closed)
-        closed.append(True)
+    enclosed = np.flatnonzero((seen >= min_cells) & ~leaky)
+    room_of = np.full(n + 1, -1, dtype=np.int32)  # region -> room; the last entry for -1
+    room_of[enclosed] = np.arange(len(enclosed))
+    labels = room_of[regions]
+    closed = [True] * len(enclosed)
     open_floor = grid.free & ~barrier & (regions >= 0) & leaky[regions.clip(0)]
     pieces, m = label(open_floor)
     sizes = np.bincount(pieces[pieces >= 0], minlength=m)
-    for k in np.flatnonzero(sizes >= min_cells).tolist():
-        labels[pieces == k] = len(closed)
-        closed.append(False)
-    return labels, closed
+    kept = np.flatnonzero(sizes >= config.min_open_area / grid.cell**2)
+    piece_room = np.full(m + 1, -1, dtype=np.int32)
+    piece_room[kept] = len(closed) + np.arange(len(kept))
+    in_piece = pieces >= 0
+    labels[in_piece] = piece_room[pieces[in_piece]]
+    return labels, closed + [False] * len(kept)
 
 
 def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_], k: int) -> None:

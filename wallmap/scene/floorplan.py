@@ -600,6 +600,7 @@ def _try_corridor(
     # the jambs, which keeps the side wall one wall, as it looks from the corridor.
     doors: dict[tuple[int, int], list[tuple[float, float]]] = {}
     candidates: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    behind: list[tuple[int, int, int]] = []  # the door each candidate room opens through
     for side, verts in enumerate(sides):
         outward = normals * (1.0 if side == 0 else -1.0)
         for run, (start, end) in enumerate(pairwise(verts)):
@@ -624,6 +625,7 @@ def _try_corridor(
                 far_a = a + depth_a * se2.rotate(outward[run], lean_a)
                 far_b = b + depth_b * se2.rotate(outward[run], lean_b)
                 candidates.append([(a, far_a), (far_a, far_b), (far_b, b)])
+                behind.append((side, run, j))
     if sum(map(len, doors.values())) < 3 or not all(
         any(doors[side, run] for run in range(n_legs)) for side in (0, 1)
     ):
@@ -633,10 +635,12 @@ def _try_corridor(
         return None
     # A room that would come too near another wall stays a plain gap.
     rooms: list[list[tuple[np.ndarray, np.ndarray]]] = []
-    for room in candidates:
+    opened: dict[tuple[int, int, int], int] = {}  # door -> the truth id of the room behind it
+    for room, door in zip(candidates, behind, strict=True):
         if _walls_well_formed([*segments, *room], tees=True):
             segments += room
             rooms.append(room)
+            opened[door] = len(rooms)
     if not rooms:
         return None
 
@@ -666,7 +670,45 @@ def _try_corridor(
         furniture=tuple(furniture),
         ceiling_height=ceiling,
         route=plan.route,
+        rooms=_corridor_rooms(sides, rooms),
+        doors=_corridor_doors(sides, doors, opened),
     )
+
+
+def _counter_clockwise(points: Sequence[np.ndarray]) -> tuple[Point, ...]:
+    """The polygon's vertices, reversed if they ran clockwise."""
+    xy = np.array(points, dtype=float)
+    area = np.dot(xy[:, 0], np.roll(xy[:, 1], -1)) - np.dot(xy[:, 1], np.roll(xy[:, 0], -1))
+    return tuple(_point(p) for p in (xy if area > 0 else xy[::-1]))
+
+
+def _corridor_rooms(
+    sides: list[list[np.ndarray]], rooms: list[list[tuple[np.ndarray, np.ndarray]]]
+) -> tuple[Room, ...]:
+    """The corridor (room 0) and the rooms behind its doors (1, 2, ...), as truth."""
+    corridor = Room(0, _counter_clockwise([*sides[0], *sides[1][::-1]]))
+    behind = (
+        Room(k + 1, _counter_clockwise([room[0][0], room[1][0], room[2][0], room[2][1]]))
+        for k, room in enumerate(rooms)
+    )
+    return (corridor, *behind)
+
+
+def _corridor_doors(
+    sides: list[list[np.ndarray]],
+    doors: dict[tuple[int, int], list[tuple[float, float]]],
+    opened: dict[tuple[int, int, int], int],
+) -> tuple[Door, ...]:
+    """Every door in the corridor's side walls: into a room behind it, or into nothing."""
+    out = []
+    for (side, run), spans in sorted(doors.items()):
+        start, end = sides[side][run], sides[side][run + 1]
+        unit = (end - start) / np.linalg.norm(end - start)
+        for j, (d0, d1) in enumerate(spans):
+            room = opened.get((side, run, j))
+            joined = (0,) if room is None else (0, room)
+            out.append(Door(len(out), _point(start + d0 * unit), _point(start + d1 * unit), joined))
+    return tuple(out)
 
 
 def _furniture_along(
