@@ -2,8 +2,9 @@
 
 Part 1: strips of three rooms joined by doorways, and kinked corridors with small rooms behind
 some of their doors (``generate_floorplan``, glass in some walls, furniture below the band;
-the corridor's robot stays in the corridor, so the IoU columns are of the rooms entered), written as 320x240 depth bags, mapped offline with tf poses
-(``wallmap.offline``, the services' code) and segmented as the mapper serves them. Rooms are
+the corridor's robot stays in the corridor, so the IoU columns are of the rooms entered),
+written as 320x240 depth bags, mapped offline with tf poses (``wallmap.offline``, the
+services' code) and segmented as the mapper serves them. Rooms are
 matched one to one with the truth by IoU of their outlines (rasterised at 5 cm); doors by their
 centres. Part 2: one update (draw nothing new, segment, give ids) of a building of 10 x 10
 rooms of 4 x 4 m off corridors, from its true walls and the floor seen along a route through
