@@ -377,6 +377,32 @@ def test_page_draws_the_live_map_of_a_played_scene(stack, browser, tmp_path):
     assert browser.errors == []
 
 
+def test_page_fills_the_rooms_and_tells_a_rooms_numbers_on_hover(stack, browser, tmp_path):
+    """A strip of three rooms: the page draws the mapper's rooms and doors, and hovering a room
+    shows its id, area, walls and doors."""
+    bag = tmp_path / "strip.bag"
+    write_scene_bag(bag, seed=1, n_frames=900, fmt="ros1", sensor="depth16")
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    url = start_view(stack)
+    browser.call("Page.navigate", url=url)
+    stack.run("player", str(bag), "--fast", *stack.zenoh_args)
+    served = json.loads(stack.run("query", "--rooms", "--json", *stack.zenoh_args).stdout)
+    assert len(served["rooms"]) == 3
+    browser.wait_for(
+        "document.getElementById('summary').textContent.includes('3 rooms, 2 doors')", timeout=20
+    )
+    room = max(served["rooms"], key=lambda r: r["area"])
+    browser.mouse("mouseMoved", *screen_point(browser, *room["centroid"]))
+    tip = browser.wait_for(
+        "(t => !t.hidden && t.textContent)(document.getElementById('tip'))", timeout=5
+    )
+    assert tip.startswith(f"room {room['id']}"), tip
+    assert f"area   {room['area']:.2f} m²" in tip
+    assert tip.count("door ") == len(room["doors"])
+    assert browser.errors == []
+
+
 def build_big_map(n_walls: int) -> Any:
     """benchmarks/mapper_scaling.py's grid of rooms, as benchmarks/query_latency.py uses it."""
     spec = importlib.util.spec_from_file_location(
@@ -508,6 +534,18 @@ def test_api_sends_only_what_changed_and_skips_stale_updates():
     with pytest.raises(MessageError, match="finite"):  # refused before it reaches the map
         update(30, [{**wall(3, 1.0), "u": float("nan")}], [])
     assert live.delta(0)["walls"] == now["walls"]
+
+
+def test_api_sends_the_rooms_when_they_change():
+    live = LiveMap()
+    first = live.delta(0)
+    assert first["rooms"] == {"rooms": [], "doors": []}
+    body = {"v": 1, "rooms": [{"id": 4, "polygon": [[0, 0], [1, 0], [1, 1]]}], "doors": []}
+    live.set_rooms(body)
+    changed = live.delta(first["version"])
+    assert changed["rooms"]["rooms"][0]["id"] == 4
+    live.set_rooms(body)  # the same again: nothing new
+    assert "rooms" not in live.delta(changed["version"])
 
 
 def test_latest_observations_are_placed_with_the_pose_at_their_stamp():

@@ -42,7 +42,7 @@ def _pose_at(poses: deque[Pose], stamp: float) -> Pose | None:
 
 
 class LiveMap:
-    """The map, versioned per wall, plus the newest pose and observations. Thread-safe."""
+    """The map, versioned per wall, its rooms, the newest pose and observations. Thread-safe."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -57,6 +57,8 @@ class LiveMap:
         self._poses: deque[Pose] = deque(maxlen=POSES_KEPT)
         self._observations: Observations | None = None
         self._status: str | None = "waiting for the mapper"
+        self._rooms: dict[str, Any] = {"rooms": [], "doors": []}
+        self._rooms_version = 0
 
     # --- feeding -----------------------------------------------------------------------------
 
@@ -100,6 +102,14 @@ class LiveMap:
             if changed:
                 self.version = version
             return True
+
+    def set_rooms(self, body: dict[str, Any]) -> None:
+        """Take the mapper's rooms and doors (``map/rooms`` or its updates), whole."""
+        rooms = {"rooms": list(body.get("rooms", ())), "doors": list(body.get("doors", ()))}
+        with self._lock:
+            if rooms != self._rooms:
+                self.version += 1
+                self._rooms, self._rooms_version = rooms, self.version
 
     def add_pose(self, pose: Pose) -> None:
         """Keep a pose in its place by stamp; when full, the oldest makes room.
@@ -172,6 +182,8 @@ class LiveMap:
             }
             if full or self._trajectory_version > since:
                 body["trajectory"] = self._trajectory
+            if full or self._rooms_version > since:
+                body["rooms"] = self._rooms
             return body
 
     def latest(self) -> dict[str, Any]:

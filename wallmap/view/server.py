@@ -37,6 +37,7 @@ from wallmap.common.transport import (
     open_session,
 )
 from wallmap.config import Config
+from wallmap.map_client import fetch_rooms
 from wallmap.options import VIEW, ZENOH
 from wallmap.options import add_command as add_options_command
 from wallmap.view.live import LiveMap
@@ -147,9 +148,14 @@ class Feed:
         # Declared before the first query, so no change falls between the two.
         self._subscribers = [
             session.declare_subscriber(key, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
-            for key in (keys.map_updates, keys.pose, keys.observations)
+            for key in (keys.map_updates, keys.pose, keys.observations, keys.map_rooms_updates)
         ]
-        handlers: list[Callable[[bytes], None]] = [self._update, self._pose, self._observations]
+        handlers: list[Callable[[bytes], None]] = [
+            self._update,
+            self._pose,
+            self._observations,
+            self._rooms,
+        ]
         self._threads = [
             threading.Thread(target=self._drain, args=(sub.handler, handle), daemon=True)
             for sub, handle in zip(self._subscribers, handlers, strict=True)
@@ -182,9 +188,21 @@ class Feed:
     def _observations(self, payload: bytes) -> None:
         self._live.set_observations(unpack_observations(payload))
 
+    def _rooms(self, payload: bytes) -> None:
+        body = decode(payload)
+        if not isinstance(body, dict):
+            raise MessageError("a rooms update is a map")
+        self._live.set_rooms(body)
+
     def _query_loop(self) -> None:
         for reply in self._replies():
             self._live.replace(reply)
+            try:
+                self._live.set_rooms(fetch_rooms(self._session, self._keys, timeout=QUERY_TIMEOUT))
+            except MalformedReplyError as err:
+                self._stats.refuse(self._keys.map_rooms, str(err))
+            except QueryError:
+                pass  # a mapper from before rooms: the walls alone
 
     def _replies(self) -> Iterator[MapReply]:
         """The whole map now and every REQUERY_PERIOD seconds; the page shows why when not."""

@@ -22,14 +22,19 @@
     observation: "#138a36",
     label: "#202020",
     hover: "rgba(0, 0, 0, 0.55)",
+    door: "#2f855a",
+    rooms: ["#f6c85f", "#9dd866", "#6fb1d8", "#ca472f", "#a27ea8", "#ffa056", "#8dddd0"],
   };
+  const ROOM_ALPHA = 0.28;
 
   const $ = (id) => document.getElementById(id);
   const canvas = $("map");
   const ctx = canvas.getContext("2d");
   const tip = $("tip");
 
-  const map = { version: 0, walls: new Map(), trajectory: [], frames: 0, observations: 0 };
+  const map = {
+    version: 0, walls: new Map(), trajectory: [], frames: 0, observations: 0, rooms: [], doors: [],
+  };
   let latest = { pose: null, observations: null, status: null };
   let latestKey = "";
   const view = { scale: 40, ox: 0, oy: 0, follow: true }; // follow: refit as the map grows
@@ -203,6 +208,7 @@
     ctx.setTransform(dpr * s, 0, 0, -dpr * s, dpr * view.ox, dpr * view.oy);
     const px = 1 / s;
     const wide = (g) => g.maxHalf * s >= 1; // narrower bands hide under the wall's line
+    drawRooms();
     fillPolygons(confirmed.filter(wide).flatMap((g) => g.bands), COLOUR.band);
     fillPolygons(tentative.filter(wide).flatMap((g) => g.bands), COLOUR.tentativeBand);
     strokeLines(visible.flatMap((g) => g.gaps), COLOUR.gap, 1.2 * px);
@@ -213,14 +219,54 @@
     ctx.setLineDash([6 * px, 4 * px]);
     strokeLines(tentative.flatMap((g) => g.pieces), COLOUR.tentative, 2 * px);
     ctx.setLineDash([]);
+    strokeLines(map.doors.map((d) => [d.p0, d.p1]), COLOUR.door, 5 * px);
     drawLatest(px);
 
     // Screen drawing: text reads upright.
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     drawLabels(s);
+    drawRoomLabels(s);
     drawScaleBar(s, h);
     report(t0);
     showTip(hovered);
+  }
+
+  // Rooms under everything, each its own colour by id; the mapper's outlines are in metres.
+  function drawRooms() {
+    ctx.globalAlpha = ROOM_ALPHA;
+    for (const room of map.rooms) {
+      if (room.polygon.length < 3) continue;
+      fillPolygons([room.polygon], COLOUR.rooms[room.id % COLOUR.rooms.length]);
+    }
+    ctx.globalAlpha = 1;
+  }
+
+  function drawRoomLabels(s) {
+    ctx.font = "12px sans-serif";
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    ctx.fillStyle = COLOUR.label;
+    for (const room of map.rooms) {
+      const [x, y] = room.centroid;
+      ctx.fillText(`room ${room.id}: ${room.area.toFixed(1)} m²`, view.ox + x * s, view.oy - y * s);
+    }
+  }
+
+  // The room under the pointer (map-frame point in its outline), for the tip.
+  function roomAt(mx, my) {
+    const x = (mx - view.ox) / view.scale;
+    const y = (view.oy - my) / view.scale;
+    return map.rooms.find((room) => inside(x, y, room.polygon)) || null;
+  }
+
+  function inside(x, y, polygon) {
+    let odd = false;
+    for (let i = 0, j = polygon.length - 1; i < polygon.length; j = i++) {
+      const [xi, yi] = polygon[i];
+      const [xj, yj] = polygon[j];
+      if (yi > y !== yj > y && x < xi + ((y - yi) * (xj - xi)) / (yj - yi)) odd = !odd;
+    }
+    return odd;
   }
 
   // One fill per polygon: a single path of thousands of overlapping polygons takes the
@@ -390,6 +436,18 @@
   }
 
   function showTip(g) {
+    const room = !g && pointer && !drag ? roomAt(pointer.x, pointer.y) : null;
+    if (room) {
+      const doors = map.doors.filter((d) => room.doors.includes(d.id));
+      tip.textContent = [
+        `room ${room.id}${room.closed ? "" : " (open: not all of it seen)"}`,
+        `area   ${room.area.toFixed(2)} m²`,
+        `walls  ${room.walls.join(", ") || "-"}`,
+        ...doors.map((d) => `door ${d.id}: ${d.width.toFixed(2)} m to ${d.rooms.filter((r) => r !== room.id).join(", ") || "unexplored"}`),
+      ].join("\n");
+      placeTip();
+      return;
+    }
     if (!g || !pointer || drag) {
       tip.hidden = true;
       return;
@@ -403,6 +461,10 @@
       `n_obs  ${r.n_obs} (${r.n_views} views)`,
       `length ${g.length.toFixed(2)} m, ${g.pieces.length} segment${g.pieces.length > 1 ? "s" : ""}`,
     ].join("\n");
+    placeTip();
+  }
+
+  function placeTip() {
     tip.hidden = false;
     const room = canvas.clientWidth - tip.offsetWidth - 4;
     tip.style.left = `${Math.min(pointer.x + 14, room)}px`;
@@ -497,13 +559,14 @@
     for (const rec of delta.walls) map.walls.set(rec.id, geometry(rec));
     for (const id of delta.removed) map.walls.delete(id);
     if (delta.trajectory) map.trajectory = delta.trajectory;
+    if (delta.rooms) Object.assign(map, { rooms: delta.rooms.rooms, doors: delta.rooms.doors });
     Object.assign(map, { version: delta.version, frames: delta.frames, observations: delta.observations });
     document.body.dataset.version = map.version;
     let tentative = 0;
     for (const g of map.walls.values()) tentative += g.rec.tentative ? 1 : 0;
     $("summary").textContent =
-      `${map.walls.size} walls (${tentative} tentative) from ${map.frames} frames, ` +
-      `${map.observations} observations`;
+      `${map.walls.size} walls (${tentative} tentative), ${map.rooms.length} rooms, ` +
+      `${map.doors.length} doors from ${map.frames} frames, ${map.observations} observations`;
     return true;
   }
 
