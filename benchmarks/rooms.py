@@ -85,6 +85,8 @@ def score(seed: int, frames: int, folder: Path, layout: str) -> dict[str, float]
         "rooms": len(reply.rooms),
         "truth": len(plan.rooms),
         "matched": len(matched),
+        "entered": len(ious),
+        "entered_truth": len(entered),
         "iou_min": min(ious, default=0.0),
         "iou_median": statistics.median(ious or [0.0]),
         "doors": len(reply.doors),
