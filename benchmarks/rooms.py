@@ -24,22 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from wallmap.common.grid_labels import inside_polygon
 from wallmap.common.map_records import WallRecord
 from wallmap.offline import rooms, run_bag
+from wallmap.room_evaluation import evaluate_rooms
 from wallmap.scene import Camera, load_truth, write_scene_bag
 from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan
 from wallmap.services.mapper.room_map import RoomMap
-
-
-def iou(a: np.ndarray, b: np.ndarray, step: float = 0.05) -> float:
-    """Intersection over union of two polygons, on a grid of ``step``."""
-    both = np.concatenate([a, b])
-    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
-    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    in_a, in_b = inside_polygon(grid, a), inside_polygon(grid, b)
-    return float((in_a & in_b).sum() / max((in_a | in_b).sum(), 1))
 
 
 def score(seed: int, frames: int, folder: Path, layout: str) -> dict[str, float]:
@@ -55,46 +45,25 @@ def score(seed: int, frames: int, folder: Path, layout: str) -> dict[str, float]
         plan=generate_floorplan(seed, layout=layout),
     )
     plan = load_truth(Path(f"{bag}.truth.json"))[0]
-    reply = rooms(run_bag(bag))
-    pairs = sorted(
-        (
-            (iou(np.array(r.polygon), np.array(t.polygon)), r.id, t.id)
-            for r in reply.rooms
-            for t in plan.rooms
-        ),
-        reverse=True,
-    )
-    matched: dict[int, int] = {}
-    ious = []
+    found = evaluate_rooms(rooms(run_bag(bag)).to_map(), plan)
     entered = {t.id for t in plan.rooms} if layout == "rooms" else {0}  # a corridor's robot
-    for value, mine, theirs in pairs:  # stays in the corridor: its side rooms are glimpses
-        if value > 0.3 and mine not in matched and theirs not in matched.values():
-            matched[mine] = theirs
-            if theirs in entered:
-                ious.append(value)
-    centre_err, width_err, joined = [], [], 0
-    for door in plan.doors:
-        centre = np.add(door.p0, door.p1) / 2
-        near = [d for d in reply.doors if np.hypot(*(np.array(d.center) - centre)) < 0.5]
-        if near:
-            found = near[0]
-            centre_err.append(float(np.hypot(*(np.array(found.center) - centre))))
-            width_err.append(abs(found.width - float(np.hypot(*np.subtract(door.p1, door.p0)))))
-            joined += sorted(matched.get(r, -1) for r in found.rooms) == sorted(door.rooms)
+    ious = [v for t, v in found.ious.items() if t in entered]  # stays in it: the rest glimpses
     return {
-        "rooms": len(reply.rooms),
-        "truth": len(plan.rooms),
-        "matched": len(matched),
+        "rooms": found.rooms,
+        "truth": found.truth_rooms,
+        "matched": len(found.matched),
+        "false": found.false,
+        "split": found.split,
         "entered": len(ious),
         "entered_truth": len(entered),
         "iou_min": min(ious, default=0.0),
         "iou_median": statistics.median(ious or [0.0]),
-        "doors": len(reply.doors),
-        "door_truth": len(plan.doors),
-        "doors_found": len(centre_err),
-        "joined": joined,
-        "centre": max(centre_err, default=0.0),
-        "width": max(width_err, default=0.0),
+        "doors": found.doors,
+        "door_truth": found.truth_doors,
+        "doors_found": found.doors_found,
+        "joined": found.doors_joined,
+        "centre": found.centre_err,
+        "width": found.width_err,
     }
 
 
@@ -153,15 +122,17 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=900)
     args = parser.parse_args()
     print(
-        "| building | seed | rooms / truth | matched | entered found | IoU min | IoU median | "
-        "doors / truth | found | rooms joined right | centre err max m | width err max m |"
+        "| building | seed | rooms / truth | matched | false | split | entered found | IoU min | "
+        "IoU median | doors / truth | found | rooms joined right | centre err max m | "
+        "width err max m |"
     )
-    print("|---|---:|---|---:|---|---:|---:|---|---:|---:|---:|---:|")
+    print("|---|---:|---|---:|---:|---:|---|---:|---:|---|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         for layout, seed in [(k, n) for k in ("rooms", "corridor") for n in range(args.seeds)]:
             s = score(seed, args.frames, Path(tmp), layout)
             print(
                 f"| {layout} | {seed} | {s['rooms']} / {s['truth']} | {s['matched']} | "
+                f"{s['false']} | {s['split']} | "
                 f"{s['entered']} / {s['entered_truth']} | {s['iou_min']:.3f} | "
                 f"{s['iou_median']:.3f} | {s['doors']} / {s['door_truth']} | {s['doors_found']} | "
                 f"{s['joined']} | {s['centre']:.3f} | {s['width']:.3f} |",

@@ -270,12 +270,13 @@ def _report(
     # Scoring and drawing, imported here: every `wallmap` command would pay for them.
     from wallmap.evaluation import evaluate_map  # noqa: PLC0415 - see above
     from wallmap.plot import write_picture  # noqa: PLC0415 - see above
+    from wallmap.room_evaluation import evaluate_rooms  # noqa: PLC0415 - see above
 
     options = config.up
     with open_session(config.zenoh) as session:
         query = MapQuery(min_obs=options.min_obs, trajectory=True)
         reply = fetch_map(session, Keys(config.zenoh.prefix), query)
-        wanted = options.json_out or options.picture
+        wanted = options.json_out or options.picture or truth is not None
         rooms = fetch_rooms(session, Keys(config.zenoh.prefix)) if wanted else None
     if partial:
         print(f"stopped before the end of the recording: the map of its first {reply.frames} "
@@ -290,6 +291,8 @@ def _report(
     if truth is not None:
         plan, _, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
+        if plan.rooms and rooms is not None:
+            print(f"rooms against the ground truth: {evaluate_rooms(rooms, plan).summary()}")
     if options.json_out:
         document = to_json(reply, config=to_plain(config), partial=partial, rooms=rooms)
         options.json_out.write_text(document, "utf-8")

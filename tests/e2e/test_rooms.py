@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from conftest import run_wallmap
 
-from wallmap.common.grid_labels import inside_polygon
 from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.room_evaluation import iou
 from wallmap.scene import load_truth
 from wallmap.services.mapper import ros2_out
 
@@ -26,15 +26,6 @@ def strip(scene_bags):
     return scene_bags("rooms.bag", seed=1, n_frames=900, fmt="ros1", sensor="depth16")
 
 
-def _iou(a: list, b: list, step: float = 0.05) -> float:
-    both = np.concatenate([a, b])
-    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
-    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    in_a, in_b = inside_polygon(grid, np.asarray(a)), inside_polygon(grid, np.asarray(b))
-    return float((in_a & in_b).sum() / (in_a | in_b).sum())
-
-
 def _assert_rooms_match(body: dict, truth_path) -> None:
     plan = load_truth(truth_path)[0]
     assert body["v"] == 1
@@ -43,11 +34,11 @@ def _assert_rooms_match(body: dict, truth_path) -> None:
     assert len(rooms) == len(plan.rooms), "no false, split or missed room"
     truth_of = {}
     for room_id, room in rooms.items():
-        score, truth_of[room_id] = max((_iou(room["polygon"], t.polygon), t.id) for t in plan.rooms)
+        score, truth_of[room_id] = max((iou(room["polygon"], t.polygon), t.id) for t in plan.rooms)
         assert score >= 0.7, (room_id, score)
         assert room["area"] == pytest.approx(abs(_area(room["polygon"])), rel=1e-2)
     assert len(set(truth_of.values())) == len(rooms), "one to one"
-    assert max(_iou(r["polygon"], plan.rooms[truth_of[i]].polygon) for i, r in rooms.items()) > 0.9
+    assert max(iou(r["polygon"], plan.rooms[truth_of[i]].polygon) for i, r in rooms.items()) > 0.9
     assert len(body["doors"]) == len(plan.doors)
     for door in plan.doors:
         centre = np.add(door.p0, door.p1) / 2

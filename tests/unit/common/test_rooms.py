@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from wallmap.common.free_space import FreeSpace
-from wallmap.common.grid_labels import inside_polygon
 from wallmap.common.rooms import WallSegments, find_rooms
+from wallmap.room_evaluation import iou
 from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan, smooth_route
 
 
@@ -26,15 +26,6 @@ def _walls(walls: list[Wall]) -> list[WallSegments]:
     return [WallSegments(w.id, np.array([[w.p0, w.p1]])) for w in walls]
 
 
-def _iou(a: np.ndarray, b: np.ndarray, step: float = 0.05) -> float:
-    both = np.concatenate([a, b])
-    xs = np.arange(both[:, 0].min(), both[:, 0].max(), step)
-    ys = np.arange(both[:, 1].min(), both[:, 1].max(), step)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    in_a, in_b = inside_polygon(grid, a), inside_polygon(grid, b)
-    return float((in_a & in_b).sum() / (in_a | in_b).sum())
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_a_strip_of_rooms_gives_each_room_and_each_doorway(seed: int) -> None:
     plan = generate_floorplan(seed, glass_fraction=0.0)
@@ -42,7 +33,7 @@ def test_a_strip_of_rooms_gives_each_room_and_each_doorway(seed: int) -> None:
     assert len(layout.rooms) == len(plan.rooms), "no false, no split, no missed room"
     truth_of = {}
     for k, room in enumerate(layout.rooms):
-        scores = [(_iou(room.polygon, np.array(t.polygon)), t.id) for t in plan.rooms]
+        scores = [(iou(room.polygon, np.array(t.polygon)), t.id) for t in plan.rooms]
         best, truth_of[k] = max(scores)
         assert best >= 0.9
         assert room.closed

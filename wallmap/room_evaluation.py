@@ -1,0 +1,126 @@
+"""Rooms and doors scored against a scene's truth, for `wallmap up --truth` and benchmarks.
+
+Rooms are matched one to one with the truth's by the IoU of their outlines (both rasterised on a
+5 cm grid), best pairs first, a pair counting from an IoU of 0.3; a truth room left unmatched is
+missed, a served room left unmatched is false, two served rooms over one truth room (the second
+overlapping it by 0.3 or more of its own area) a split. Doors are matched by centre, within
+0.5 m; a matched door joins the right rooms when its rooms are the matches of the truth's.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wallmap.common.grid_labels import inside_polygon
+from wallmap.scene.floorplan import FloorPlan
+
+STEP = 0.05  # m: the grid outlines are compared on
+MATCH_IOU = 0.3
+DOOR_REACH = 0.5  # m
+
+
+def _grid(polygons: Iterable[np.ndarray]) -> np.ndarray:
+    both = np.concatenate(list(polygons))
+    xs = np.arange(both[:, 0].min(), both[:, 0].max() + STEP, STEP)
+    ys = np.arange(both[:, 1].min(), both[:, 1].max() + STEP, STEP)
+    return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two polygons (n, 2), on a 5 cm grid."""
+    grid = _grid([a, b])
+    in_a, in_b = inside_polygon(grid, a), inside_polygon(grid, b)
+    return float((in_a & in_b).sum() / max(int((in_a | in_b).sum()), 1))
+
+
+def _share_of(a: np.ndarray, b: np.ndarray) -> float:
+    """How much of polygon ``a`` lies in ``b``."""
+    grid = _grid([a, b])
+    in_a = inside_polygon(grid, a)
+    return float((in_a & inside_polygon(grid, b)).sum() / max(int(in_a.sum()), 1))
+
+
+@dataclass(frozen=True)
+class RoomScore:
+    """Served rooms and doors against the truth's (see the module's doc)."""
+
+    rooms: int
+    truth_rooms: int
+    matched: dict[int, int]  # served room id -> truth room id
+    ious: dict[int, float]  # truth room id -> the IoU of its match
+    split: int
+    doors: int
+    truth_doors: int
+    doors_found: int
+    doors_joined: int  # of those found, joining the right rooms
+    centre_err: float  # m, the largest of the doors found
+    width_err: float  # m, likewise
+
+    @property
+    def false(self) -> int:
+        """Served rooms matching no truth room and not part of a split."""
+        return self.rooms - len(self.matched) - self.split
+
+    def summary(self) -> str:
+        """One line for people."""
+        values = list(self.ious.values())
+        ious = (
+            f"IoU min {min(values):.2f}, median {statistics.median(values):.2f}" if values else "-"
+        )
+        return (
+            f"rooms {len(self.matched)} of {self.truth_rooms} found ({ious}), {self.false} false, "
+            f"{self.split} split; doors {self.doors_found} of {self.truth_doors} found, "
+            f"{self.doors_joined} joining the right rooms (centre within {self.centre_err:.2f} m, "
+            f"width within {self.width_err:.2f} m)"
+        )
+
+
+def evaluate_rooms(body: dict[str, Any], plan: FloorPlan) -> RoomScore:
+    """The mapper's rooms reply (the contract's payload) against the plan's truth."""
+    served = {r["id"]: np.asarray(r["polygon"], dtype=float) for r in body["rooms"]}
+    truth = {t.id: np.asarray(t.polygon, dtype=float) for t in plan.rooms}
+    pairs = sorted(
+        ((iou(mine, theirs), i, t) for i, mine in served.items() for t, theirs in truth.items()),
+        reverse=True,
+    )
+    matched: dict[int, int] = {}
+    ious: dict[int, float] = {}
+    for value, i, t in pairs:
+        if value >= MATCH_IOU and i not in matched and t not in ious:
+            matched[i], ious[t] = t, value
+    split = sum(
+        1
+        for i, mine in served.items()
+        if i not in matched and any(_share_of(mine, truth[t]) >= MATCH_IOU for t in ious)
+    )
+    found, joined, centre, width = 0, 0, [0.0], [0.0]
+    for door in plan.doors:
+        middle = (np.asarray(door.p0) + np.asarray(door.p1)) / 2
+        near = [
+            d for d in body["doors"] if np.hypot(*(np.asarray(d["center"]) - middle)) <= DOOR_REACH
+        ]
+        if not near:
+            continue
+        d = min(near, key=lambda d: np.hypot(*(np.asarray(d["center"]) - middle)))
+        found += 1
+        centre.append(float(np.hypot(*(np.asarray(d["center"]) - middle))))
+        width.append(abs(d["width"] - float(np.hypot(*np.subtract(door.p1, door.p0)))))
+        joined += sorted(matched.get(r, -1) for r in d["rooms"]) == sorted(door.rooms)
+    return RoomScore(
+        rooms=len(served),
+        truth_rooms=len(truth),
+        matched=matched,
+        ious=ious,
+        split=split,
+        doors=len(body["doors"]),
+        truth_doors=len(plan.doors),
+        doors_found=found,
+        doors_joined=joined,
+        centre_err=max(centre),
+        width_err=max(width),
+    )
