@@ -7,7 +7,10 @@ on a grid of ``FreeSpace``'s cells:
    next segment of its own wall) leaves an opening: the shortest span from that end, roughly
    along its wall (``door_angle``), to another wall's end or face, at most ``door_max`` long.
    Spans under ``door_min`` are gaps in the masonry (a corner not quite seen): closed as wall.
-   Longer ones are door candidates, and closed too while the floor is divided.
+   Longer ones are door candidates, and closed too while the floor is divided. Two ends
+   facing each other across a wider gap in one line of wall (up to ``passage_max``) make a
+   passage, a door candidate too. A longer span from an end left open that nothing was ever
+   seen through (``blind_max``; under ``blind_seen`` of it seen free) is closed as wall: glass.
 2. **Regions.** Walls and openings drawn as barriers (``barrier`` thick), the rest of the grid
    split into 4-connected regions. A region that does not reach the grid's edge is enclosed:
    it is a room, ``closed``, and its floor is all of it (corners the sensor never saw
@@ -21,7 +24,7 @@ on a grid of ``FreeSpace``'s cells:
 
 Each room is then its cells grown back into the barrier they face (a barrier's half thickness),
 outlined, simplified (``simplify``). Pure numpy: no Zenoh, so the mapper, the offline runner
-and the benchmarks share it. Ids are not given here (``common.room_ids``).
+and the benchmarks share it. Ids are not given here (``services.mapper.room_map``).
 """
 
 from __future__ import annotations
@@ -62,6 +65,8 @@ class RoomsConfig:
         min_area: smallest room (m^2).
         min_open_area: smallest room not closed (m^2): less is a glimpse through a door.
         simplify: how far (m) an outline may stray from its cells.
+        passage_max: widest opening (m) between two ends of one line of wall that is a door.
+        passage_angle: how far (deg) each end's wall may point off the other end.
         blind_max: longest span (m) closed as an unseen wall (glass) where nothing crossed it.
         blind_angle: how far (deg) such a span may turn from its wall's direction.
         blind_seen: share of a span's cells seen free beyond which it is a passage, not glass.
@@ -75,6 +80,8 @@ class RoomsConfig:
     min_area: float = 1.0
     min_open_area: float = 2.5
     simplify: float = 0.12
+    passage_max: float = 4.0
+    passage_angle: float = 15.0
     blind_max: float = 8.0
     blind_angle: float = 60.0
     blind_seen: float = 0.1
@@ -206,6 +213,36 @@ def openings(
     return list(found.values())
 
 
+def passages(
+    walls: Sequence[WallSegments], config: RoomsConfig, spans: Sequence[Opening] = ()
+) -> list[Opening]:
+    """Wider openings in one line of wall: two free ends facing each other across the gap.
+
+    From ``door_max`` to ``passage_max`` wide, each end's wall pointing at the other within
+    ``passage_angle``: an opening too wide for a door that still divides two spaces, as an
+    open-plan office's passages do. Ends that already have a span (``spans``) are left.
+    """
+    ends = _free_ends(walls, config.joint)
+    used = {tuple(np.round(p, 3)) for s in spans for p in (s.p0, s.p1)}
+    gap = ends.point[None, :] - ends.point[:, None]  # (i, j): from end i to end j
+    dist = np.hypot(gap[..., 0], gap[..., 1])
+    cos_min = math.cos(math.radians(config.passage_angle))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        towards = np.einsum("ijk,ik->ij", gap, ends.outward) / dist
+        back = -np.einsum("ijk,jk->ij", gap, ends.outward) / dist
+    ok = (dist > config.door_max) & (dist <= config.passage_max)
+    ok &= (towards >= cos_min) & (back >= cos_min) & np.triu(np.ones_like(ok), 1).astype(bool)
+    found = []
+    for i, j in np.argwhere(ok).tolist():
+        p, q = ends.point[i], ends.point[j]
+        if {tuple(np.round(p, 3)), tuple(np.round(q, 3))} & used:
+            continue
+        if not _crosses_walls(p, q, ends.a, ends.b, int(ends.piece[i])):
+            found.append(Opening(int(ends.wall[i]), p.copy(), q.copy()))
+            used |= {tuple(np.round(p, 3)), tuple(np.round(q, 3))}
+    return found
+
+
 def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
     """Per end, the nearest point of another segment ahead of it; NaN where none.
 
@@ -311,6 +348,7 @@ def find_rooms(
         for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
             grid.draw(barrier, p, q, radius)
     spans = [o for o in openings(walls, config) if o.width > 0]
+    spans += passages(walls, config, spans)
     for span in [*spans, *_blind_spans(grid, walls, spans, config)]:
         grid.draw(barrier, span.p0, span.p1, radius)
     labels, rooms = _regions(grid, barrier, config)

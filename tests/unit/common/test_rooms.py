@@ -81,3 +81,21 @@ def test_a_stretch_never_seen_through_is_wall_not_a_door() -> None:
     assert len(layout.rooms) == 1
     assert not layout.doors
     assert layout.rooms[0].closed, "the gap is closed as wall"
+
+
+def test_an_open_plan_passage_wider_than_a_door_is_a_door_between_two_rooms() -> None:
+    """Two 6 x 4 m rooms; the wall between them open over 3 m of its 4 (0.5 m each side)."""
+    corners = [(0.0, 0.0), (12.0, 0.0), (12.0, 4.0), (0.0, 4.0)]
+    walls = [
+        Wall(k, p, q)
+        for k, (p, q) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True))
+    ]
+    walls += [Wall(4, (6.0, 0.0), (6.0, 0.5)), Wall(5, (6.0, 3.5), (6.0, 4.0))]
+    route = np.array([[1.0 + 0.1 * k, 2.0] for k in range(100)])
+    layout = find_rooms(_walls(walls), _seen(FloorPlan(walls=tuple(walls)), route))
+    assert len(layout.rooms) == 2
+    assert all(room.closed for room in layout.rooms)
+    assert sorted(round(room.area) for room in layout.rooms) == [24, 24]
+    (door,) = layout.doors
+    assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(3.0, abs=0.05)
+    assert door.rooms == (0, 1)
