@@ -53,7 +53,8 @@ class MapperConfig:
         shadow_cover: see above.
         merge_gap: two confirmed walls on one line (their estimates agree, see
             ``line_agreement``) separated along it by at most this (m) are one wall with a gap:
-            a door, a window, an occlusion...
+            a door, a window, an occlusion, a stretch of glass (4 m: an office's glass front
+            between two pieces of solid wall is one wall, issue 28)...
         door_width: ...but one with a gap wider than a door that the sensor saw through (rays
             crossing the gap well before they ended) is two walls; so are two whose gap a wall
             crosses.
@@ -88,7 +89,7 @@ class MapperConfig:
     shadow_offset: float = 0.10
     shadow_ratio: float = 2.0
     shadow_cover: float = 0.7
-    merge_gap: float = 3.0
+    merge_gap: float = 4.0
     door_width: float = 1.8
     line_floor: tuple[float, float] = (0.01, float(np.radians(0.5)))
     fan_angle: float = np.radians(8.0)

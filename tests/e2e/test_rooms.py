@@ -7,6 +7,7 @@ detector and mapper; the rooms and doors the mapper serves against the plan's tr
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -14,7 +15,8 @@ from conftest import run_wallmap
 
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.room_evaluation import iou
-from wallmap.scene import load_truth
+from wallmap.scene import load_truth, write_scene_bag
+from wallmap.scene.floorplan import glass_wall_plan
 from wallmap.services.mapper import ros2_out
 
 pytestmark = pytest.mark.e2e
@@ -89,3 +91,39 @@ def test_query_plot_and_export_show_the_live_mappers_rooms(stack, strip, tmp_pat
     array = ros2_out.decode(replies[0].ok.payload.to_bytes(), "visualization_msgs/msg/MarkerArray")
     assert sorted({m.ns for m in array.markers}) == ["doors", "room_labels", "rooms"]
     assert sum(m.ns == "rooms" for m in array.markers) == 3
+
+
+def test_a_glass_stretch_in_a_wall_is_one_wall_and_no_door(tmp_path) -> None:
+    """3.6 m of floor-to-ceiling glass in the middle of a 10 m wall, solid wall either side."""
+    info = write_scene_bag(
+        tmp_path / "glass.bag",
+        seed=2,
+        n_frames=600,
+        fmt="ros1",
+        sensor="depth16",
+        plan=glass_wall_plan(2, glass=3.6),
+    )
+    out = tmp_path / "map.json"
+    done = run_wallmap(
+        "up",
+        str(info.path),
+        "--fast",
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        "--truth",
+        str(info.truth_path),
+    )
+    scored = re.search(r"precision ([\d.]+) .*recall ([\d.]+) .*duplicates (\d+)", done.stdout)
+    assert scored, done.stdout
+    precision, recall, duplicates = float(scored[1]), float(scored[2]), int(scored[3])
+    assert duplicates == 0, done.stdout
+    assert precision >= 0.98
+    assert recall >= 0.95
+    body = json.loads(out.read_text())
+    assert len([w for w in body["walls"] if not w["tentative"]]) == 4
+    assert body["rooms"]["doors"] == []
+    (room,) = body["rooms"]["rooms"]
+    assert room["closed"]
+    assert room["area"] == pytest.approx(60.0, rel=0.03)
+    assert "rooms 1 of 1 found" in done.stdout

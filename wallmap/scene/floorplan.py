@@ -938,3 +938,34 @@ def junction_plan(seed: int) -> FloorPlan:
 
     walls = tuple(Wall(i, turn(p), turn(q), height=height) for i, (p, q) in enumerate(segments))
     return FloorPlan(walls, (), height, tuple(turn(p) for p in route))
+
+
+def glass_wall_plan(seed: int, glass: float = 3.6) -> FloorPlan:
+    """One room of 10 x 6 m whose far long wall is glass over ``glass`` m of its middle.
+
+    The glass runs floor to ceiling (across any height band), with solid wall either side: the
+    wall is one wall, the room one room, and the glass no door. The route drives the room's
+    length twice, facing the glass on the way. The plan is turned by a random angle about the
+    origin, which the route starts beside.
+    """
+    rng = np.random.default_rng(seed)
+    height = float(rng.uniform(2.5, 3.0))
+    start = (10.0 - glass) / 2
+    corners = [(0.0, 0.0), (10.0, 0.0), (10.0, 6.0), (0.0, 6.0)]
+    angle = float(rng.uniform(-math.pi, math.pi))
+
+    def turn(p: Sequence[float]) -> Point:
+        x, y = se2.rotate((p[0] - 2.0, p[1] - 3.0), angle).tolist()
+        return (x, y)
+
+    walls = []
+    for k, (p, q) in enumerate(zip(corners, corners[1:] + corners[:1], strict=True)):
+        panes = ((start, start + glass, 0.0, height),) if k == 2 else ()
+        walls.append(Wall(k, turn(p), turn(q), height=height, windows=panes))
+    route = [(2.0, 3.0), (8.0, 3.5), (8.0, 2.0), (2.0, 2.0)]
+    return FloorPlan(
+        walls=tuple(walls),
+        ceiling_height=height,
+        route=tuple(turn(p) for p in route),
+        rooms=(Room(0, tuple(turn(p) for p in corners)),),
+    )
