@@ -12,8 +12,10 @@ restarted on it serves the same ids.
 
 from __future__ import annotations
 
+import base64
 import threading
 import time
+import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -112,6 +114,18 @@ class _Kept:
 def _keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     """Cells (i, j) as single sortable integers."""
     return np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
+
+
+def _pack(keys: NDArray[np.int64]) -> str:
+    """Sorted cell keys for a state file: their differences, compressed (mostly ones)."""
+    steps = np.diff(keys, prepend=0).astype("<i8")
+    return base64.b64encode(zlib.compress(steps.tobytes(), 6)).decode("ascii")
+
+
+def _unpack(text: str) -> NDArray[np.int64]:
+    """Inverse of ``_pack``."""
+    steps = np.frombuffer(zlib.decompress(base64.b64decode(text)), dtype="<i8")
+    return np.cumsum(steps).astype(np.int64)
 
 
 def _greedy(pairs: list[tuple[float, int, int]]) -> dict[int, int]:
@@ -268,7 +282,7 @@ class RoomMap:
             "free": self.free.to_json(),
             "next_room": self.next_room,
             "next_door": self.next_door,
-            "rooms": [{"id": k.id, "keys": k.keys.tolist()} for k in self.kept],
+            "rooms": [{"id": k.id, "cells": _pack(k.keys)} for k in self.kept],
             "doors": [{"id": i, "center": c.tolist()} for i, c in self.doors.items()],
         }
 
@@ -278,11 +292,11 @@ class RoomMap:
             self.free = FreeSpace.from_json(data["free"])
             self.next_room, self.next_door = int(data["next_room"]), int(data["next_door"])
             self.kept = [
-                _Kept(int(r["id"]), np.asarray(r["keys"], dtype=np.int64)) for r in data["rooms"]
+                _Kept(int(r["id"]), _unpack(r["cells"])) for r in data["rooms"]
             ]
             self.doors = {
                 int(d["id"]): np.asarray(d["center"], dtype=float).reshape(2) for d in data["doors"]
             }
-        except (KeyError, TypeError, ValueError) as err:
+        except (KeyError, TypeError, ValueError, zlib.error) as err:
             msg = f"rooms: {err}"
             raise ValueError(msg) from err
