@@ -58,12 +58,7 @@ def _room_feature(room: dict[str, Any]) -> dict[str, Any]:
         **{k: room[k] for k in ("id", "area", "walls", "doors", "closed")},
     }
     properties["centroid"] = _xy(room["centroid"])
-    return {
-        "type": "Feature",
-        "id": f"room-{room['id']}",
-        "geometry": geometry,
-        "properties": properties,
-    }
+    return _feature(f"room-{room['id']}", geometry, properties)
 
 
 def _door_feature(door: dict[str, Any]) -> dict[str, Any]:
@@ -71,12 +66,14 @@ def _door_feature(door: dict[str, Any]) -> dict[str, Any]:
     geometry = {"type": "LineString", "coordinates": [_xy(door["p0"]), _xy(door["p1"])]}
     properties = {"kind": "door", **{k: door[k] for k in ("id", "width", "wall", "rooms")}}
     properties["center"] = _xy(door["center"])
-    return {
-        "type": "Feature",
-        "id": f"door-{door['id']}",
-        "geometry": geometry,
-        "properties": properties,
-    }
+    return _feature(f"door-{door['id']}", geometry, properties)
+
+
+def _feature(
+    feature_id: str, geometry: dict[str, Any], properties: dict[str, Any]
+) -> dict[str, Any]:
+    """A GeoJSON Feature; room and door ids are prefixed, as walls own the plain numbers."""
+    return {"type": "Feature", "id": feature_id, "geometry": geometry, "properties": properties}
 
 
 def to_geojson(reply: MapReply, rooms: dict[str, Any] | None = None) -> dict[str, Any]:
