@@ -287,3 +287,52 @@ def test_geojson_without_trajectory_or_walls():
     assert to_geojson(make_reply([]))["features"] == []
     single = to_geojson(make_reply([], TRAJECTORY[:1]))["features"][0]
     assert single["geometry"] == {"type": "Point", "coordinates": [-2.0, 0.0]}
+
+
+ROOMS = {
+    "rooms": [
+        {
+            "id": 3,
+            "polygon": [[-4, -3], [5, -3], [5, 2], [-4, 2]],
+            "area": 45.0,
+            "centroid": [0.5, -0.5],
+            "walls": [0, 1, 2, 3],
+            "doors": [1],
+            "closed": True,
+        },
+    ],
+    "doors": [
+        {
+            "id": 1,
+            "center": [5.0, 0.0],
+            "width": 0.9,
+            "p0": [5.0, -0.45],
+            "p1": [5.0, 0.45],
+            "wall": 1,
+            "rooms": [3],
+        }
+    ],
+}
+
+
+def test_rooms_are_polygons_and_doors_lines_in_geojson_and_drawn_in_svg(tmp_path):
+    reply = make_reply(ROOM, TRAJECTORY)
+    features = to_geojson(reply, ROOMS)["features"]
+    (room,) = [f for f in features if f["properties"]["kind"] == "room"]
+    (door,) = [f for f in features if f["properties"]["kind"] == "door"]
+    ring = room["geometry"]["coordinates"][0]
+    assert room["geometry"]["type"] == "Polygon"
+    assert ring[0] == ring[-1] == [-4.0, -3.0]
+    assert (room["id"], room["properties"]["area"], room["properties"]["doors"]) == (
+        "room-3",
+        45.0,
+        [1],
+    )
+    assert door["geometry"] == {"type": "LineString", "coordinates": [[5.0, -0.45], [5.0, 0.45]]}
+    assert door["properties"]["rooms"] == [3]
+    svg = tmp_path / "map.svg"
+    plot.write_svg(svg, reply, size=400, rooms=ROOMS)
+    text = svg.read_text()
+    assert text.count('class="room"') == 1
+    assert text.count('class="door"') == 1
+    assert "R3 45.0 m" in text
