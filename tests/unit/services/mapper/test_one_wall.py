@@ -96,7 +96,12 @@ def test_a_wall_with_a_window_across_the_band_is_one_wall_with_a_gap() -> None:
 
 
 def test_pieces_too_far_apart_stay_two_walls() -> None:
-    assert len(served(two_pieces(3.5))) == 2
+    assert len(served(two_pieces(4.5))) == 2
+
+
+def test_pieces_across_an_unseen_stretch_of_glass_are_one_wall() -> None:
+    """3.5 m that nothing was seen through (glass returns no depth): within merge_gap, 4 m."""
+    assert len(served(two_pieces(3.5))) == 1
 
 
 def test_a_door_seen_through_is_still_a_door_but_a_wide_opening_seen_through_is_not() -> None:
