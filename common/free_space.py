@@ -28,7 +28,7 @@ from wallmap.common import se2
 Array = NDArray[np.float64]
 
 CELL = 0.1  # m
-MIN_FREE = 4  # samples in a cell (about two rays, or one pass of the robot) to be free floor
+MIN_FREE = 2  # samples in a cell (about one ray, or a pass of the robot) to be free floor
 RAY_SHORT = 0.2  # m: a ray's last stretch is not counted (it ends on the wall, or near it)
 ROBOT_RADIUS = 0.2  # m of floor around the sensor that the robot stands on
 GROW = 64  # cells added on a side when the grid grows (amortises the copies)

@@ -64,6 +64,8 @@ class RoomsConfig:
         barrier: half thickness (m) of walls and openings while the floor is divided.
         min_area: smallest room (m^2).
         min_open_area: smallest room not closed (m^2): less is a glimpse through a door.
+        fill_reach: how far (m) an open room is filled out from its seen floor.
+        closed_seen: share of an enclosed region seen free for it to be a closed room.
         simplify: how far (m) an outline may stray from its cells.
         passage_max: widest opening (m) between two ends of one line of wall that is a door.
         passage_angle: how far (deg) each end's wall may point off the other end.
@@ -79,6 +81,8 @@ class RoomsConfig:
     barrier: float = 0.1
     min_area: float = 1.0
     min_open_area: float = 2.5
+    fill_reach: float = 1.5
+    closed_seen: float = 0.5
     simplify: float = 0.12
     passage_max: float = 4.0
     passage_angle: float = 15.0
@@ -354,7 +358,7 @@ def find_rooms(
     labels, rooms = _regions(grid, barrier, config)
     for k, closed in enumerate(rooms):
         if not closed:
-            _fill_open(grid, labels, barrier, k)
+            _fill_open(grid, labels, barrier, k, config.fill_reach)
     _grow(labels, barrier, math.ceil(radius / grid.cell))
     shapes = [
         _shape(grid, cells, closed, config)
@@ -398,6 +402,10 @@ def _regions(
     leaky = touches_border(regions, n)
     min_cells = config.min_area / grid.cell**2
     seen = np.bincount(regions[grid.free & (regions >= 0)], minlength=n)
+    size = np.bincount(regions[regions >= 0], minlength=n)
+    # Enclosed, and mostly seen: spans closed across unexplored space (it looks like glass:
+    # nothing seen through) can enclose more unknown than floor; such a region is open.
+    leaky |= seen < config.closed_seen * size
     enclosed = np.flatnonzero((seen >= min_cells) & ~leaky)
     room_of = np.full(n + 1, -1, dtype=np.int32)  # region -> room; the last entry for -1
     room_of[enclosed] = np.arange(len(enclosed))
@@ -414,12 +422,15 @@ def _regions(
     return labels, closed + [False] * len(kept)
 
 
-def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_], k: int) -> None:
+def _fill_open(
+    grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_], k: int, reach: float
+) -> None:
     """An open room's unseen floor within the hull of its seen floor and the walls it faces.
 
     Glass returns nothing, so the floor before it is never seen: the room's walls and seen
-    floor still span it. Only cells of no room and no barrier are taken, and only those the
-    room's own cells reach within the hull without crossing a barrier.
+    floor still span it. Only cells of no room and no barrier are taken, only those the
+    room's own cells reach within the hull without crossing a barrier, and only within
+    ``reach`` (m) of them: the hull of a kinked corridor spans much that is not corridor.
     """
     mine = labels == k
     near = barrier & _dilate(mine, 2)
@@ -438,7 +449,8 @@ def _fill_open(grid: _Grid, labels: NDArray[np.int32], barrier: NDArray[np.bool_
     # behind one of its walls that the hull happens to span.
     parts, _ = label(open_floor)
     reached = np.unique(parts[(box_labels == k) & (parts >= 0)])
-    take = np.isin(parts, reached) & (box_labels < 0)
+    near_mine = _dilate(box_labels == k, round(reach / grid.cell))
+    take = np.isin(parts, reached) & (box_labels < 0) & near_mine
     labels[bi[take], bj[take]] = k
 
 

@@ -261,6 +261,18 @@ def free_rays(stack: NDArray[np.float32], T_base_sensor: Array) -> tuple[Array, 
     return origin, ends
 
 
+def scan_free_rays(scan: Array, T_base_sensor: Array) -> tuple[Array, Array]:
+    """A scanner's free rays: its position and its returns (n, 2, base frame), evenly sampled.
+
+    Every beam of a 2-D scanner ends where it met something, at the one height it sees.
+    """
+    origin = np.asarray(T_base_sensor, dtype=np.float64)[:2, 3].copy()
+    ends = scan[np.isfinite(scan).all(axis=1)]
+    if len(ends) > MAX_FREE_RAYS:
+        ends = ends[_evenly_spread(len(ends))]
+    return origin, ends
+
+
 @functools.lru_cache(maxsize=1024)
 def _evenly_spread(count: int) -> NDArray[np.intp]:
     """MAX_FREE_RAYS indices spread evenly over ``count``, both ends included."""

@@ -15,6 +15,7 @@ from wallmap.common.scan_row import (
     RowSelection,
     frame_stack,
     free_rays,
+    scan_free_rays,
     to_base_xy,
     upright_points,
 )
@@ -88,8 +89,12 @@ class WallDetector:
         row = stack[0] if stack.shape[0] == 1 else upright_points(stack, T_base_sensor)
         scan = to_base_xy(row, T_base_sensor)
         # A depth camera's clutter needs telling from walls; a lidar's scan, one height only,
-        # does not, and its path stays as it was.
-        origin, rays = (None, None) if is_scanner else free_rays(stack, T_base_sensor)
+        # does not, and its path stays as it was: its returns are its free rays as they are
+        # (the mapper draws the floor seen with them, and tests no wall against them).
+        if is_scanner:
+            origin, rays = scan_free_rays(scan, T_base_sensor)
+        else:
+            origin, rays = free_rays(stack, T_base_sensor)
         noise = self.noise[frame.sensor]
         base = self.config.scan_ransac if is_scanner else self.config.ransac
         params = base.scaled(noise.scale)

@@ -291,9 +291,7 @@ class RoomMap:
         try:
             self.free = FreeSpace.from_json(data["free"])
             self.next_room, self.next_door = int(data["next_room"]), int(data["next_door"])
-            self.kept = [
-                _Kept(int(r["id"]), _unpack(r["cells"])) for r in data["rooms"]
-            ]
+            self.kept = [_Kept(int(r["id"]), _unpack(r["cells"])) for r in data["rooms"]]
             self.doors = {
                 int(d["id"]): np.asarray(d["center"], dtype=float).reshape(2) for d in data["doors"]
             }

@@ -99,8 +99,16 @@ class WallMap:
 
     def finish_frame(self, frame: Observations, pose: Pose) -> None:
         """After a frame's observations: what its rays saw through, the counters, a keyframe."""
-        if frame.rays is not None and frame.ray_origin is not None and len(frame.rays):
-            self._see_through(frame.ray_origin, frame.rays, pose.vector)
+        # A scanner's rays are its returns, one height: they draw the floor seen (rooms), and
+        # test no wall (a lidar's walls are its returns already).
+        rays = frame.rays
+        if (
+            frame.sensor != "scan"
+            and rays is not None
+            and frame.ray_origin is not None
+            and len(rays)
+        ):
+            self._see_through(frame.ray_origin, rays, pose.vector)
         self.frames += 1
         self.version += 1
         self.observations += len(frame.walls)
