@@ -25,6 +25,8 @@ from wallmap.services.pipeline import Mapping
 
 ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map, at least
 BUSY_SHARE = 10.0  # ...and this many times the last one's duration
+FAST_RATE = 100.0  # frames/s: faster than a sensor, a recording played --fast...
+MAX_DEFER = 10.0  # s: ...is not held up for its rooms for longer than this
 
 
 class RoomsServer:
@@ -68,9 +70,21 @@ class RoomsServer:
 
     def _keep_current(self, stop: threading.Event) -> None:
         # A big building takes a while to segment: at most a tenth of the time is spent on it,
-        # so the frames, which share the interpreter, keep going.
-        while not stop.wait(max(ROOMS_PERIOD, BUSY_SHARE * self._mapping.rooms.seconds)):
+        # so the frames, which share the interpreter, keep going. Frames coming faster than any
+        # sensor gives them (a recording played --fast) are left to go first, up to MAX_DEFER:
+        # the rooms follow once they pause, and a query gets them current anyway.
+        frames, deferred = self._frames(), 0.0
+        while not stop.wait(period := max(ROOMS_PERIOD, BUSY_SHARE * self._mapping.rooms.seconds)):
+            now = self._frames()
+            rate, frames = (now - frames) / period, now
+            if rate > FAST_RATE and deferred < MAX_DEFER:
+                deferred += period
+                continue
+            deferred = 0.0
             self._refresh()
+
+    def _frames(self) -> int:
+        return self._mapping.map.frames
 
     def _refresh(self) -> None:
         """Segment again if the map changed since the last time; publish what changed."""
