@@ -47,7 +47,8 @@ class RoomsServer:
         self._updates = session.declare_publisher(keys.map_rooms_updates)
         self._encoded = self._encode(mapping.rooms.reply)
         self._seen: tuple[object, ...] | None = None  # the map state last segmented
-        self._refreshing = threading.Lock()  # the worker and the answerer take turns
+        self._refreshing = threading.Lock()  # the worker, the answerer and undeclare take turns
+        self._closed = False
 
     @staticmethod
     def _encode(reply: RoomsReply) -> dict[str, bytes]:
@@ -62,11 +63,16 @@ class RoomsServer:
         ]
 
     def undeclare(self) -> None:
-        """Stop answering (the answerer's channel closes)."""
-        self._queryable.undeclare()
-        self._updates.undeclare()
-        if self._markers is not None:
-            self._markers.undeclare()
+        """Stop answering (the answerer's channel closes) and publishing.
+
+        Taken between two segmentations: one under way would publish on what is undeclared.
+        """
+        with self._refreshing:
+            self._closed = True
+            self._queryable.undeclare()
+            self._updates.undeclare()
+            if self._markers is not None:
+                self._markers.undeclare()
 
     def _keep_current(self, stop: threading.Event) -> None:
         # A big building takes a while to segment: at most a tenth of the time is spent on it,
@@ -89,6 +95,8 @@ class RoomsServer:
     def _refresh(self) -> None:
         """Segment again if the map changed since the last time; publish what changed."""
         with self._refreshing:
+            if self._closed:
+                return
             with self._lock:
                 wall_map = self._mapping.map
                 state = (id(wall_map), wall_map.version)
