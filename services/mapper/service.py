@@ -52,6 +52,8 @@ T = TypeVar("T")
 MAX_PENDING = 2048  # observations waiting for poses (a few KB each)
 HOLD_POLL = 0.02  # s between looks at a held gap
 UPDATE_PERIOD = 0.5  # s between map updates while busy
+ACK_REPEAT = 1.0  # s between two repeats of the newest run's acknowledgement...
+REPEAT_FOR = 30.0  # ...for this long after it last moved
 UPDATE_FRAMES = 5  # frames integrated that make an update due sooner (a bag played --fast)
 DROP_REASONS = {Lookup.WAIT: "pose_timeout", Lookup.MISSING: "no_pose"}
 BACKLOG = "backlog"  # dropped because MAX_PENDING newer frames wait for poses too
@@ -221,6 +223,7 @@ def run(
         workers = [
             threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
             threading.Thread(target=_updates, args=(core, updates, stop, ros2), daemon=True),
+            threading.Thread(target=_repeat_progress, args=(core, progress, stop), daemon=True),
             *rooms.workers(stop),
         ]
         for worker in workers:
@@ -435,6 +438,25 @@ def _updates(
             updates.put(encode(changes.to_map()))
         if ros2 is not None and served is not None:
             ros2.publish(served)
+
+
+def _repeat_progress(core: MapperCore, progress: zenoh.Publisher, stop: threading.Event) -> None:
+    """Say the newest run's progress again every ACK_REPEAT s, for REPEAT_FOR s after it moved.
+
+    An acknowledgement sent while a router restarts is lost, and an idle mapper has nothing new
+    to say: the player would wait for it until it gives up. Saying it again costs a small
+    message a second; a player takes the furthest it has heard.
+    """
+    said, moved = None, 0.0
+    while not stop.wait(ACK_REPEAT):
+        with core.lock:
+            latest = next(reversed(core.progress.runs.values()), None)
+        if latest is None:
+            continue
+        if latest != said:
+            said, moved = latest, time.monotonic()
+        if time.monotonic() - moved <= REPEAT_FOR:
+            progress.put(pack(latest))
 
 
 class _Waiting:
