@@ -16,6 +16,7 @@ Zenoh, so the mapper and the offline runner share it.
 from __future__ import annotations
 
 import base64
+import functools
 import zlib
 from collections.abc import Sequence
 from typing import Any
@@ -81,9 +82,7 @@ class FreeSpace:
         return np.concatenate([points[inside], self._disc(start)])
 
     def _disc(self, centre: Array) -> Array:
-        span = np.arange(-ROBOT_RADIUS, ROBOT_RADIUS + 1e-9, 0.5 * self.cell)
-        grid = np.stack(np.meshgrid(span, span), axis=-1).reshape(-1, 2)
-        return centre + grid[np.hypot(grid[:, 0], grid[:, 1]) <= ROBOT_RADIUS]
+        return centre + _disc_offsets(self.cell)
 
     def add_points(self, points: Array) -> None:
         """One count per point (n, 2) in the cell it falls in, saturating at 255."""
@@ -140,3 +139,16 @@ class FreeSpace:
             raise ValueError(msg) from err
         space.origin, space.counts = origin, counts
         return space
+
+
+@functools.lru_cache(maxsize=4)
+def _disc_offsets(cell: float) -> Array:
+    """Points every half cell over the robot's footprint, about its centre.
+
+    Made once per cell size: every drawn frame adds them.
+    """
+    span = np.arange(-ROBOT_RADIUS, ROBOT_RADIUS + 1e-9, 0.5 * cell)
+    grid = np.stack(np.meshgrid(span, span), axis=-1).reshape(-1, 2)
+    offsets = grid[np.hypot(grid[:, 0], grid[:, 1]) <= ROBOT_RADIUS]
+    offsets.flags.writeable = False
+    return offsets

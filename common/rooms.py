@@ -156,6 +156,7 @@ class _Ends:
     outward: Array  # (e, 2) unit: the way its segment would go on
     a: Array  # (s, 2) every segment's first end
     b: Array  # (s, 2) ...and second
+    feet: Array  # (e, s, 2) each end's nearest point on each segment
 
 
 def _feet(points: Array, a: Array, b: Array) -> Array:
@@ -176,10 +177,11 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
     outward = np.concatenate([a - b, b - a])
     piece = np.tile(np.arange(len(a)), 2)
     norm = np.hypot(outward[:, 0], outward[:, 1])
+    feet = _feet(point, a, b)
     if len(a) < 2:
         keep = np.zeros(len(point), dtype=bool)
     else:
-        gap = np.hypot(*(_feet(point, a, b) - point[:, None]).transpose(2, 0, 1))
+        gap = np.hypot(*(feet - point[:, None]).transpose(2, 0, 1))
         gap[np.arange(len(point)), piece] = np.inf
         keep = (norm > 1e-9) & (gap.min(axis=1) >= joint)
     return _Ends(
@@ -189,11 +191,12 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
         outward=outward[keep] / norm[keep, None],
         a=a,
         b=b,
+        feet=feet[keep],
     )
 
 
 def openings(
-    walls: Sequence[WallSegments],
+    ends: _Ends,
     config: RoomsConfig,
     reach: float | None = None,
     angle: float | None = None,
@@ -203,7 +206,6 @@ def openings(
     ``reach`` and ``angle``: how far and how far off its wall's direction to look (the
     configuration's door width and angle unless given).
     """
-    ends = _free_ends(walls, config.joint)
     reach = config.door_max if reach is None else reach
     cos_max = math.cos(math.radians(config.door_angle if angle is None else angle))
     targets = _nearest_ahead(ends, reach, cos_max)
@@ -217,17 +219,14 @@ def openings(
     return list(found.values())
 
 
-def passages(
-    walls: Sequence[WallSegments], config: RoomsConfig, spans: Sequence[Opening] = ()
-) -> list[Opening]:
+def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) -> list[Opening]:
     """Wider openings in one line of wall: two free ends facing each other across the gap.
 
     From ``door_max`` to ``passage_max`` wide, each end's wall pointing at the other within
     ``passage_angle``: an opening too wide for a door that still divides two spaces, as an
     open-plan office's passages do. Ends that already have a span (``spans``) are left.
     """
-    ends = _free_ends(walls, config.joint)
-    used = {tuple(np.round(p, 3)) for s in spans for p in (s.p0, s.p1)}
+    used = _ends_of(spans)
     gap = ends.point[None, :] - ends.point[:, None]  # (i, j): from end i to end j
     dist = np.hypot(gap[..., 0], gap[..., 1])
     cos_min = math.cos(math.radians(config.passage_angle))
@@ -239,11 +238,11 @@ def passages(
     found = []
     for i, j in np.argwhere(ok).tolist():
         p, q = ends.point[i], ends.point[j]
-        if {tuple(np.round(p, 3)), tuple(np.round(q, 3))} & used:
+        if {_end_key(p), _end_key(q)} & used:
             continue
         if not _crosses_walls(p, q, ends.a, ends.b, int(ends.piece[i])):
             found.append(Opening(int(ends.wall[i]), p.copy(), q.copy()))
-            used |= {tuple(np.round(p, 3)), tuple(np.round(q, 3))}
+            used |= {_end_key(p), _end_key(q)}
     return found
 
 
@@ -257,7 +256,7 @@ def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
     n = len(ends.point)
     if not n:
         return np.zeros((0, 2))
-    feet = _feet(ends.point, a, b)  # (n, s, 2)
+    feet = ends.feet
     points = np.concatenate(
         [np.broadcast_to(a, feet.shape), np.broadcast_to(b, feet.shape), feet], axis=1
     )
@@ -274,6 +273,16 @@ def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
     out = points[np.arange(n), best].copy()
     out[~ok.any(axis=1)] = np.nan
     return out
+
+
+def _end_key(point: Array) -> tuple[float, ...]:
+    """A span's end as a key, to the millimetre: spans from one end are told apart by it."""
+    return tuple(np.round(point, 3).tolist())
+
+
+def _ends_of(spans: Sequence[Opening]) -> set[tuple[float, ...]]:
+    """The ends of ``spans`` as keys (``_end_key``)."""
+    return {_end_key(p) for s in spans for p in (s.p0, s.p1)}
 
 
 def _crosses_walls(p: Array, q: Array, a: Array, b: Array, own: int) -> bool:
@@ -351,9 +360,10 @@ def find_rooms(
     for wall in walls:
         for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
             grid.draw(barrier, p, q, radius)
-    spans = [o for o in openings(walls, config) if o.width > 0]
-    spans += passages(walls, config, spans)
-    for span in [*spans, *_blind_spans(grid, walls, spans, config)]:
+    ends = _free_ends(walls, config.joint)
+    spans = [o for o in openings(ends, config) if o.width > 0]
+    spans += passages(ends, config, spans)
+    for span in [*spans, *_blind_spans(grid, ends, spans, config)]:
         grid.draw(barrier, span.p0, span.p1, radius)
     labels, rooms = _regions(grid, barrier, config)
     for k, closed in enumerate(rooms):
@@ -374,7 +384,7 @@ def find_rooms(
 
 
 def _blind_spans(
-    grid: _Grid, walls: Sequence[WallSegments], spans: list[Opening], config: RoomsConfig
+    grid: _Grid, ends: _Ends, spans: list[Opening], config: RoomsConfig
 ) -> list[Opening]:
     """Longer spans from ends left open that nothing was ever seen through: glass, closed.
 
@@ -382,10 +392,10 @@ def _blind_spans(
     rays stop at it and the robot does not cross it, so the floor along the span is unseen.
     A passage the robot drove or looked through is seen free and stays open.
     """
-    used = {tuple(np.round(p, 3)) for s in spans for p in (s.p0, s.p1)}
+    used = _ends_of(spans)
     found = []
-    for span in openings(walls, config, config.blind_max, config.blind_angle):
-        if tuple(np.round(span.p0, 3)) in used or span.width <= config.door_max:
+    for span in openings(ends, config, config.blind_max, config.blind_angle):
+        if _end_key(span.p0) in used or span.width <= config.door_max:
             continue
         t = np.linspace(0.0, 1.0, max(3, int(span.width / grid.cell)))[:, None]
         i, j, ok = grid.local(span.p0 + t * (span.p1 - span.p0))
