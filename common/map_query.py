@@ -8,14 +8,17 @@ apart. A wrong parameter is refused with a reply that says which one and why.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.map_records import MapReply
 from wallmap.common.transport import Keys
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -111,14 +114,26 @@ def fetch_map(
     selector = keys.map_walls + (
         "?" + ";".join(f"{k}={v}" for k, v in params.items()) if params else ""
     )
+    return ask_mapper(session, selector, "map", MapReply.from_map, timeout)
+
+
+def ask_mapper(
+    session: zenoh.Session, selector: str, what: str, read: Callable[[Any], T], timeout: float
+) -> T:
+    """The first reply to ``selector``, decoded and ``read``; ``what`` names it in errors.
+
+    Raises:
+        QueryError: no mapper answered, or it refused the query.
+        MalformedReplyError: the reply does not decode, or ``read`` refuses it (MessageError).
+    """
     for reply in session.get(selector, timeout=timeout):
         if reply.ok is None:
             msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
             raise QueryError(msg)
         try:
-            return MapReply.from_map(decode(reply.ok.payload.to_bytes()))
+            return read(decode(reply.ok.payload.to_bytes()))
         except MessageError as err:
-            msg = f"the map reply is unreadable: {err}"
+            msg = f"the {what} reply is unreadable: {err}"
             raise MalformedReplyError(msg) from err
-    msg = f"no mapper answered on {keys.map_walls} within {timeout:.0f} s"
+    msg = f"no mapper answered on {selector.split('?', maxsplit=1)[0]} within {timeout:.0f} s"
     raise QueryError(msg)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from wallmap.common.codec import SCHEMA_VERSION, MessageError, decode
-from wallmap.common.map_query import MalformedReplyError, QueryError
+from wallmap.common.codec import SCHEMA_VERSION, MessageError
+from wallmap.common.map_query import ask_mapper
 from wallmap.common.map_records import MapReply
 from wallmap.common.transport import Keys
 
@@ -65,19 +65,16 @@ def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> 
     Raises:
         QueryError: no mapper answered, it refused, or its reply is unreadable.
     """
-    for reply in session.get(keys.map_rooms, timeout=timeout):
-        if reply.ok is None:
-            raise QueryError(f"the mapper refused the query: {reply.err.payload.to_string()}")
-        try:
-            body = decode(reply.ok.payload.to_bytes())
-        except MessageError as err:
-            raise MalformedReplyError(f"the rooms reply is unreadable: {err}") from err
-        if not isinstance(body, dict) or not all(
-            isinstance(body.get(k), list) for k in ("rooms", "doors")
-        ):
-            raise MalformedReplyError("the rooms reply has no 'rooms' and 'doors' lists")
-        return body
-    raise QueryError(f"no mapper answered on {keys.map_rooms} within {timeout:.0f} s")
+    return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout)
+
+
+def _rooms_body(body: Any) -> dict[str, Any]:
+    """The rooms reply, if it holds the contract's two lists; MessageError if not."""
+    if not isinstance(body, dict) or not all(
+        isinstance(body.get(k), list) for k in ("rooms", "doors")
+    ):
+        raise MessageError("it has no 'rooms' and 'doors' lists")
+    return body
 
 
 def format_rooms(body: dict[str, Any]) -> str:

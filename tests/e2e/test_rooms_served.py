@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import run_wallmap
+from conftest import free_port, run_wallmap
 
 from wallmap.common.transport import Keys, ZenohSettings, open_session
 from wallmap.room_evaluation import iou
@@ -51,6 +51,11 @@ def _assert_rooms_match(body: dict, truth_path) -> None:
         assert all(found["id"] in rooms[r]["doors"] for r in found["rooms"])
 
 
+def _own_router() -> tuple[str, str]:
+    """A free loopback port for `wallmap up`'s router: the default one is the docs' alone."""
+    return ("--connect", f"tcp/127.0.0.1:{free_port()}")
+
+
 def _area(polygon: list) -> float:
     x, y = np.asarray(polygon).T
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
@@ -58,7 +63,15 @@ def _area(polygon: list) -> float:
 
 def test_up_writes_the_rooms_and_doors_of_the_building(strip, tmp_path) -> None:
     out = tmp_path / "map.json"
-    run_wallmap("up", str(strip.path), "--fast", "--exit-when-done", "--json-out", str(out))
+    run_wallmap(
+        *("up", *_own_router()),
+        str(strip.path),
+        "--fast",
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        *_own_router(),
+    )
     _assert_rooms_match(json.loads(out.read_text())["rooms"], strip.truth_path)
 
 
