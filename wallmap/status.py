@@ -44,7 +44,11 @@ def fetch_status(session: zenoh.Session, keys: Keys, timeout: float = 2.0) -> li
             "uptime": counters.get(name, {}).get("uptime"),
             "counters": counters.get(name, {}).get("counters", {}),
             **({"pose_source": s} if (s := counters.get(name, {}).get("pose_source")) else {}),
-            **{k: counters[name][k] for k in ("topics", "missing") if k in counters.get(name, {})},
+            **{
+                k: counters[name][k]
+                for k in ("run", "topics", "missing")
+                if k in counters.get(name, {})
+            },
         }
         for name in live
     ]

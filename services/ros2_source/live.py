@@ -4,10 +4,12 @@ A bag holds every transform before it is played; a live robot's arrive as they c
 sensor message often comes before the tf that places it (``odom -> base_link`` at 50 Hz, the
 camera at 30 Hz, a localiser's ``map -> odom`` late by a scan). So each sensor message waits, as
 a tf2 message filter holds it, until the tree covers its stamp: its mount (base <- sensor) and,
-with a tf pose source, the robot's pose (fixed <- robot). One that waits longer than
+with a tf pose source, the robot's pose (fixed <- robot); a depth image waits for a CameraInfo
+too (a camera sends it beside each image, often just after). One that waits longer than
 ``tf_wait`` seconds of the robot's own time (the newest stamp seen on any topic) is dropped and
 counted, so a missing transform never stalls the source. A clock that jumps back (a new session
-of the robot, a bag played again) starts over: buffers, waiting frames, and the camera's info.
+of the robot, a bag played again) starts over: buffers and waiting frames (the camera's info and
+the static transforms, sent once, are kept).
 
 Frames are placed as the player places a bag's: the robot's tilt (roll, pitch, height) goes into
 the sensor's mount, and the fixed frame is levelled and the sensor's height band found by a
@@ -142,9 +144,6 @@ class LiveFrames:
         """A sensor message, to wait for its tf."""
         stamp = header_stamp(msg.header, 0)
         self._see(stamp)
-        if self.sensor_type == IMAGE and self.camera_info is None:
-            self.report("no_camera_info", "an image dropped: no CameraInfo yet")
-            return
         if len(self._waiting) >= MAX_WAITING:
             self._waiting.popleft()
             self.report("overflow", f"a frame dropped: {MAX_WAITING} waited for their tf at once")
@@ -156,6 +155,10 @@ class LiveFrames:
         for waiting in self._waiting:
             posed = self._posed(waiting)
             if posed is None and self.newest - waiting.stamp > self.tf_wait:
+                if self._without_intrinsics():
+                    self.report("no_camera_info", f"an image dropped after {self.tf_wait:g} s "
+                                "without a CameraInfo")  # fmt: skip
+                    continue
                 posed = self._posed(waiting) if self._follow_the_sensor(waiting) else None
                 if posed is None:
                     self.report("no_tf", self._missing(waiting))
@@ -170,6 +173,20 @@ class LiveFrames:
         if self._survey is not None and self._survey.complete(self.newest):
             return self._end_survey(self._survey)
         return out
+
+    def end_survey(self) -> list[SensorFrame]:
+        """The frames held for a survey not yet complete, placed by what it has so far.
+
+        For a robot that goes quiet (or a source stopping) before the survey's frames or
+        seconds are in: what it sent is not kept back for ever.
+        """
+        if self._survey is None or not self._held:
+            return []
+        return self._end_survey(self._survey)
+
+    def _without_intrinsics(self) -> bool:
+        """A depth image cannot be read yet: its CameraInfo (sent beside it) has not come."""
+        return self.sensor_type == IMAGE and self.camera_info is None
 
     def _hold(self, survey: LiveSurvey, waiting: _Waiting, pose: Pose | None,
               mount: np.ndarray) -> None:  # fmt: skip
@@ -254,6 +271,8 @@ class LiveFrames:
         message nearest in time (never waited for); else none.
         """
         spec = self.pose_source
+        if self._without_intrinsics():
+            return None
         try:
             mount = self.tf.lookup(self.base_frame, waiting.frame_id, waiting.stamp)
             if spec.kind == "tf":

@@ -40,6 +40,7 @@ from wallmap.services.ros2_source.topic_watch import TopicWatch
 
 QUEUE_DEPTH = 512  # samples waiting for the service's thread; beyond, the newest are dropped
 POSE_RATE = 200.0  # poses a second the history is sized for
+QUIET = 1.0  # s without a sample: the frames held for the survey go out
 
 
 @dataclass(frozen=True)
@@ -142,13 +143,21 @@ def _work(
     watch: TopicWatch,
     stop: threading.Event,
 ) -> None:
-    """Decode, place and publish, in the order the samples came, until ``stop``."""
+    """Decode, place and publish, in the order the samples came, until ``stop``.
+
+    Frames held for the survey go out once the robot has been quiet ``QUIET`` seconds, and when
+    the source stops: a robot that sends a few frames and pauses has them mapped.
+    """
+    heard = time.monotonic()
     while not stop.is_set():
         try:
             sample = intake.queue.get(timeout=0.1)
         except queue.Empty:
+            if time.monotonic() - heard > QUIET:
+                _send(outlet, live, live.end_survey(), stats)
             continue
-        watch.heard(sample.kind, time.monotonic())
+        heard = time.monotonic()
+        watch.heard(sample.kind, heard)
         key, msgtype = subscriptions[sample.kind]
         try:
             msg = deserialize_cdr(sample.payload, msgtype) if msgtype else _pose(sample.payload)
@@ -163,11 +172,16 @@ def _work(
             live.add_pose(msg)
         else:
             live.add_sensor(msg)
-        frames = live.ready()
-        outlet.poses(live.take_poses())  # before the frames they place
-        for frame in frames:
-            outlet.frame(frame)
-            stats.add("frames")
+        _send(outlet, live, live.ready(), stats)
+    _send(outlet, live, live.end_survey(), stats)
+
+
+def _send(outlet: _Outlet, live: LiveFrames, frames: list[Any], stats: Stats) -> None:
+    """The poses ready, then the frames they place."""
+    outlet.poses(live.take_poses())
+    for frame in frames:
+        outlet.frame(frame)
+        stats.add("frames")
 
 
 def _pose(payload: bytes) -> Any:

@@ -26,11 +26,15 @@ from wallmap.common.transport import Keys
 from wallmap.evaluation import evaluate_map
 
 
-def _wait_for(stack: Stack, service: str, timeout: float = 30.0) -> None:
+def _wait_for(
+    stack: Stack, service: str, timeout: float = 30.0, not_run: str | None = None
+) -> None:
+    """Until ``service`` answers `wallmap status` (one of another run than ``not_run``)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         out = stack.run("status", "--json", *stack.zenoh_args, timeout=30)
-        if f'"service": "{service}"' in out.stdout:
+        runs = [s.get("run") for s in json.loads(out.stdout or "[]") if s["service"] == service]
+        if any(not_run is None or run != not_run for run in runs):
             return
         time.sleep(0.2)
     pytest.fail(f"no {service} came up")
@@ -111,9 +115,10 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
         while robot.sent.get(image, 0) < 70 and playing.is_alive():
             time.sleep(0.05)
         lost_from = robot.sent.get(image, 0)  # from here until the second is up
+        first_run = _status_of(stack, "ros2")["run"]
         assert first.stop(sig=2) == 0
         second = stack.start("ros2-again", *args)
-        _wait_for(stack, "ros2")
+        _wait_for(stack, "ros2", not_run=first_run)  # the first's presence may linger
         lost = robot.sent.get(image, 0) - lost_from
         playing.join()
         robot.close()

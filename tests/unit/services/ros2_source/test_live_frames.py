@@ -73,14 +73,79 @@ def test_a_scan_whose_tf_does_not_come_is_dropped_with_the_missing_transform() -
     assert "0.5 s" in reported[0][1]
 
 
-def test_an_image_before_its_camera_info_is_dropped() -> None:
+def _image(stamp: float, size: int = 8):
+    millimetres = np.full(size * size, 2000, "<u2")  # a wall 2 m ahead
+    return T["sensor_msgs/msg/Image"](
+        header=_header(stamp, "camera"),
+        height=size,
+        width=size,
+        encoding="16UC1",
+        is_bigendian=0,
+        step=2 * size,
+        data=millimetres.view(np.uint8),
+    )
+
+
+def _camera_info(stamp: float, size: int = 8):
+    k = np.array([size, 0.0, size / 2, 0.0, size, size / 2, 0.0, 0.0, 1.0])
+    roi = T["sensor_msgs/msg/RegionOfInterest"](
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    return T["sensor_msgs/msg/CameraInfo"](
+        header=_header(stamp, "camera"),
+        height=size,
+        width=size,
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=k,
+        r=np.eye(3).ravel(),
+        p=np.hstack([k.reshape(3, 3), np.zeros((3, 1))]).ravel(),
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+
+
+def _camera(pose: str) -> tuple[LiveFrames, list[tuple[str, str]]]:
     reported: list[tuple[str, str]] = []
-    live = LiveFrames(IMAGE, parse_pose_source("none"), report=lambda c, m: reported.append((c, m)))
-    image = T["sensor_msgs/msg/Image"](header=_header(1.0, "camera"), height=2, width=2,
-                                       encoding="16UC1", is_bigendian=0, step=4,
-                                       data=np.zeros(8, np.uint8))  # fmt: skip
-    live.add_sensor(image)
-    assert reported == [("no_camera_info", "an image dropped: no CameraInfo yet")]
+    report = lambda counter, line: reported.append((counter, line))  # noqa: E731
+    live = LiveFrames(IMAGE, parse_pose_source(pose), tf_wait=0.5, report=report)
+    live.add_tf(_tf(0.0, "base_link", "camera"), static=True)
+    return live, reported
+
+
+def test_an_image_waits_for_the_camera_info_sent_after_it() -> None:
+    live, reported = _camera("none")
+    live.add_sensor(_image(1.0))
+    assert live.ready() == []
+    live.add_camera_info(_camera_info(1.0))
+    assert [f.stamp for f in live.ready()] == [1.0]
+    assert reported == []
+
+
+def test_an_image_whose_camera_info_never_comes_is_dropped_and_counted() -> None:
+    live, reported = _camera("none")
+    live.add_sensor(_image(1.0))
+    live.add_sensor(_image(1.6))  # the robot's time is 0.6 s past the first
+    assert live.ready() == []
+    assert reported == [("no_camera_info", "an image dropped after 0.5 s without a CameraInfo")]
+
+
+def test_frames_held_for_a_survey_the_robot_never_finished_go_out_when_asked() -> None:
+    live, reported = _camera("tf")
+    live.add_camera_info(_camera_info(1.0))
+    live.add_tf(_tf(0.9, "map", "base_link"), static=False)
+    live.add_tf(_tf(1.1, "map", "base_link", x=0.1), static=False)
+    live.add_sensor(_image(1.0))
+    assert live.ready() == []  # held: the survey wants 10 frames or 2 s
+    frames = live.end_survey()
+    assert [f.stamp for f in frames] == [1.0]
+    assert [p.stamp for p in live.take_poses()] == [0.9, 1.1]
+    assert [counter for counter, _ in reported] == ["surveyed"]
+    assert live.end_survey() == []  # once
+    live.add_tf(_tf(1.3, "map", "base_link", x=0.2), static=False)
+    live.add_sensor(_image(1.2))
+    assert [f.stamp for f in live.ready()] == [1.2]  # no survey now: straight out
 
 
 @pytest.mark.parametrize("pose", ["none", "odom"])
