@@ -2,8 +2,9 @@
 
 Each scene kind (see ``wallmap.scene.SCENE_KINDS``) is generated for every seed,
 recorded as a ROS 1 bag of 16-bit depth images, mapped in one process by the real detector
-and mapper (``wallmap.offline.map_bag``) and scored against its ground truth. The seeds
-default to 500-502, away from the ones the detector and mapper were tuned on (1-9) and
+and mapper (``wallmap.offline.run_bag``) and scored against its ground truth: the walls,
+and the rooms and doors where the scene has room truth (``wallmap.room_evaluation``). The
+seeds default to 500-502, away from the ones the detector and mapper were tuned on (1-9) and
 the ones the tests use. Results are in docs/accuracy.md.
 
     .venv/bin/python benchmarks/accuracy.py [--frames N] [--scenes a,b] [--seeds 500,501]
@@ -24,9 +25,12 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from wallmap.config import configured
 from wallmap.evaluation import MapScore, evaluate_map
-from wallmap.offline import map_bag, walls
+from wallmap.offline import rooms, run_bag, walls
+from wallmap.room_evaluation import RoomScore, evaluate_rooms
 from wallmap.scene import (
     SCENE_KINDS,
     FloorPlan,
@@ -61,6 +65,7 @@ class Result:
     seed: int
     poses: str
     score: MapScore
+    rooms: RoomScore | None  # None: the scene has no room truth
     frames: int
     seconds: float
     details: str
@@ -112,12 +117,20 @@ def run_scene(
                 f"player.source.pose_source={source}",
                 f"mapper.slam.enabled={str(pose_source == 'slam').lower()}",
             )
-            wall_map = map_bag(info.path, config)
+            pipeline = run_bag(info.path, config)
             seconds = time.perf_counter() - start
-            score = evaluate_map(walls(wall_map), info.plan, info.seen_counts)
+            score = evaluate_map(walls(pipeline.map), info.plan, info.seen_counts)
             details = _describe(score, info.plan, info.seen_counts)
+            path = np.column_stack([info.trajectory.x, info.trajectory.y])
+            room_score = (
+                evaluate_rooms(rooms(pipeline).to_map(), info.plan, path)
+                if info.plan.rooms
+                else None
+            )
             results.append(
-                Result(kind_name, seed, pose_source, score, info.n_frames, seconds, details)
+                Result(
+                    kind_name, seed, pose_source, score, room_score, info.n_frames, seconds, details
+                )
             )
     return results
 
@@ -146,6 +159,35 @@ def table_row(kind: str, poses: str, results: Sequence[Result]) -> str:
         f"{n_mapped}/{n_true}",
         str(sum(r.frames for r in results)),
         f"{sum(r.seconds for r in results):.1f}",
+    ]
+    return "| " + " | ".join(cells) + " |"
+
+
+ROOMS_HEADER = """\
+Rooms and doors (docs/rooms.md), for the scenes with room truth, pooled over the seeds:
+  entered    rooms the robot entered (its path passes inside) found / entered
+  IoU        of each entered room with the room it is matched to (0 if none): min, median
+  false      served rooms matching no true room; split: a second served room over one
+  doors      true doors between entered rooms found (centre within 0.5 m) / such doors;
+             joined: of those, joining the right rooms; centre, width: the largest errors, m"""
+
+
+def rooms_row(kind: str, poses: str, results: Sequence[Result]) -> str:
+    """A markdown table row of the rooms and doors of one (scene kind, pose source)."""
+    scores = [r.rooms for r in results if r.rooms is not None]
+    ious = [v for s in scores for v in s.entered_ious]
+    cells = [
+        kind,
+        poses,
+        f"{sum(v > 0 for v in ious)}/{len(ious)}",
+        f"{min(ious, default=math.nan):.2f}",
+        f"{_median(ious):.2f}",
+        str(sum(s.false for s in scores)),
+        str(sum(s.split for s in scores)),
+        f"{sum(s.doors_found for s in scores)}/{sum(s.truth_doors for s in scores)}",
+        str(sum(s.doors_joined for s in scores)),
+        f"{max((s.centre_err for s in scores), default=math.nan):.2f}",
+        f"{max((s.width_err for s in scores), default=math.nan):.2f}",
     ]
     return "| " + " | ".join(cells) + " |"
 
@@ -218,10 +260,23 @@ def main() -> None:
         for pose_source in poses:
             rows = [r for r in results if (r.kind, r.poses) == (kind, pose_source)]
             print(table_row(kind, pose_source, rows))
+    with_rooms = [k for k in kinds if any(r.rooms for r in results if r.kind == k)]
+    if with_rooms:
+        print(f"\n{ROOMS_HEADER}\n")
+        print(
+            "| scene | poses | entered | IoU min | IoU median | false | split | doors | joined "
+            "| centre m | width m |"
+        )
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        for kind in with_rooms:
+            for pose_source in poses:
+                rows = [r for r in results if (r.kind, r.poses) == (kind, pose_source)]
+                print(rooms_row(kind, pose_source, rows))
     if args.details:
         print()
         for r in results:
-            print(f"{r.kind} seed {r.seed} {r.poses}: {r.details}")
+            rooms_line = f"; {r.rooms.summary()}" if r.rooms else ""
+            print(f"{r.kind} seed {r.seed} {r.poses}: {r.details}{rooms_line}")
     print(f"\n{time.perf_counter() - start:.0f} s in all, {args.jobs} jobs")
 
 

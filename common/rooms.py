@@ -50,6 +50,7 @@ from wallmap.common.grid_labels import (
 
 Array = NDArray[np.float64]
 PAD = 8  # cells of grid kept around everything known
+TRIM_GAP = 0.3  # m unseen along a passage bridged when its door is found (``door_span``)
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,7 @@ class RoomsConfig:
         blind_max: longest span (m) closed as an unseen wall (glass) where nothing crossed it.
         blind_angle: how far (deg) such a span may turn from its wall's direction.
         blind_seen: share of a span's cells seen free beyond which it is a passage, not glass.
+        divider_min: shortest piece of wall (m) whose end may start a divider's span.
     """
 
     door_min: float = 0.6
@@ -89,6 +91,7 @@ class RoomsConfig:
     blind_max: float = 8.0
     blind_angle: float = 60.0
     blind_seen: float = 0.1
+    divider_min: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -226,7 +229,11 @@ def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) ->
     ``passage_angle``: an opening too wide for a door that still divides two spaces, as an
     open-plan office's passages do. Ends that already have a span (``spans``) are left.
     """
-    used = _ends_of(spans)
+    return _facing_ends(ends, config, _ends_of(spans))
+
+
+def _facing_ends(ends: _Ends, config: RoomsConfig, used: set[tuple[float, ...]]) -> list[Opening]:
+    """Passages between two free ends of one line of wall, facing each other (``passages``)."""
     gap = ends.point[None, :] - ends.point[:, None]  # (i, j): from end i to end j
     dist = np.hypot(gap[..., 0], gap[..., 1])
     cos_min = math.cos(math.radians(config.passage_angle))
@@ -363,6 +370,7 @@ def find_rooms(
     ends = _free_ends(walls, config.joint)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
+    spans += _divider_spans(grid, ends, spans, config)
     for span in [*spans, *_blind_spans(grid, ends, spans, config)]:
         grid.draw(barrier, span.p0, span.p1, radius)
     labels, rooms = _regions(grid, barrier, config)
@@ -378,9 +386,37 @@ def find_rooms(
     doors = [
         door
         for span in spans
-        if span.width >= config.door_min and (door := _door(grid, labels, span, radius)) is not None
+        if span.width >= config.door_min
+        and (door := _door(grid, labels, span, radius, config)) is not None
     ]
     return Layout(shapes, doors)
+
+
+def _divider_spans(
+    grid: _Grid, ends: _Ends, spans: list[Opening], config: RoomsConfig
+) -> list[Opening]:
+    """Dividers whose piece beyond the door was never mapped: door and unseen wall in one span.
+
+    From an end left open, along its wall (``passage_angle``) to another wall, ``door_max`` to
+    ``passage_max`` long, from a piece of wall ``divider_min`` long or more: a door candidate
+    when the robot or its rays crossed part of it and an end of it, ``door_min`` or more, was
+    never seen (``door_span`` finds the door). A span seen free all along is open floor, not
+    a divider, and stays open.
+    """
+    used = _ends_of(spans)
+    length = np.hypot(*(ends.b - ends.a).T)
+    found = []
+    for span in openings(ends, config, config.passage_max, config.passage_angle):
+        if _end_key(span.p0) in used or span.width <= config.door_max:
+            continue
+        k = int(np.argmin(np.hypot(*(ends.point - span.p0).T)))  # the end it starts from
+        if length[ends.piece[k]] < config.divider_min:
+            continue  # a pillar's face, a cupboard's side: no divider
+        p0, p1 = door_span(grid, span, config.door_min)
+        if float(np.hypot(*(p1 - p0))) < span.width - config.door_min / 2:
+            found.append(span)
+            used |= _ends_of([span])
+    return found
 
 
 def _blind_spans(
@@ -549,7 +585,9 @@ def _bounding_walls(
                 shapes[room].walls.append(wall.id)
 
 
-def _door(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> DoorShape | None:
+def _door(
+    grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float, config: RoomsConfig
+) -> DoorShape | None:
     """The span as a door (step 3): seen through, and other rooms (or none) on its two sides."""
     t = np.linspace(0.2, 0.8, 5)[:, None]
     along = span.p0 + t * (span.p1 - span.p0)
@@ -570,7 +608,35 @@ def _door(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) 
     if min(sides) < 0 and not _free_near(grid, along + (radius + 2.5 * grid.cell) * sides_dir):
         return None  # towards no room, and nothing seen beyond it either: not an opening
     rooms = tuple(sorted(s for s in sides if s >= 0))
-    return DoorShape(span.p0, span.p1, span.wall, rooms)
+    wide = span.width > config.door_max
+    p0, p1 = door_span(grid, span, config.door_min) if wide else (span.p0, span.p1)
+    return DoorShape(p0, p1, span.wall, rooms)
+
+
+def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array]:
+    """The door in a wide span: the stretch the robot or its rays crossed, to its jambs.
+
+    A divider whose piece beyond its door was never mapped (glass, or too little seen) leaves a
+    span of door and unmapped wall. Nothing is seen through the wall, so its stretch at one end
+    of the span is unseen: the longer unseen end, if ``door_min`` or more, is cut off. The
+    other end's unseen stretch is door beside its jamb that no ray happened to cross (floor
+    by a jamb is often hidden from every view the robot had). Gaps of up to ``TRIM_GAP``
+    along the span are bridged.
+    """
+    steps = max(3, math.ceil(2 * span.width / grid.cell))
+    t = np.linspace(0.0, 1.0, steps)
+    i, j, ok = grid.local(span.p0 + t[:, None] * (span.p1 - span.p0))
+    at = np.flatnonzero(ok & grid.free[i, j])
+    if not len(at):
+        return span.p0, span.p1
+    bridge = math.ceil(TRIM_GAP / (span.width / (steps - 1)))
+    runs = np.split(at, np.flatnonzero(np.diff(at) > bridge) + 1)
+    run = max(runs, key=lambda r: r[-1] - r[0])
+    before, after = t[run[0]], 1.0 - t[run[-1]]  # unseen at each end, shares of the span
+    if max(before, after) * span.width < door_min:
+        return span.p0, span.p1
+    lo, hi = (t[run[0]], 1.0) if before > after else (0.0, t[run[-1]])
+    return span.p0 + lo * (span.p1 - span.p0), span.p0 + hi * (span.p1 - span.p0)
 
 
 def _free_near(grid: _Grid, points: Array) -> bool:

@@ -289,10 +289,11 @@ def _report(
                if bag is not None else "(the --sensor topic and its type)")  # fmt: skip
         print(f"wallmap up: {nothing}: {why} {ask}", file=sys.stderr)
     if truth is not None:
-        plan, _, seen = truth
+        plan, trajectory, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
         if plan.rooms and rooms is not None:
-            print(f"rooms against the ground truth: {evaluate_rooms(rooms, plan).summary()}")
+            path = list(zip(trajectory.x, trajectory.y, strict=True))
+            print(f"rooms against the ground truth: {evaluate_rooms(rooms, plan, path).summary()}")
     if options.json_out:
         document = to_json(reply, config=to_plain(config), partial=partial, rooms=rooms)
         options.json_out.write_text(document, "utf-8")

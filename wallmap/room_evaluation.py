@@ -3,8 +3,10 @@
 Rooms are matched one to one with the truth's by the IoU of their outlines (both rasterised on a
 5 cm grid), best pairs first, a pair counting from an IoU of 0.3; a truth room left unmatched is
 missed, a served room left unmatched is false, two served rooms over one truth room (the second
-overlapping it by 0.3 or more of its own area) a split. Doors are matched by centre, within
-0.5 m; a matched door joins the right rooms when its rooms are the matches of the truth's.
+overlapping it by 0.3 or more of its own area) a split. What is asked of a map is the rooms the
+robot entered (its path passes inside them) and the doors between two of them: a room seen only
+through its door may be served, or not, and a door into nothing seen is not asked for. Doors are matched by centre, within 0.5 m; a matched door joins
+the right rooms when its rooms are the matches of the truth's.
 """
 
 from __future__ import annotations
@@ -15,9 +17,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from wallmap.common.grid_labels import inside_polygon
-from wallmap.scene.floorplan import FloorPlan
+from wallmap.scene.floorplan import Door, FloorPlan
 
 STEP = 0.05  # m: the grid outlines are compared on
 MATCH_IOU = 0.3
@@ -45,17 +48,28 @@ def _share_of(a: np.ndarray, b: np.ndarray) -> float:
     return float((in_a & inside_polygon(grid, b)).sum() / max(int(in_a.sum()), 1))
 
 
+def entered(plan: FloorPlan, path: ArrayLike | None) -> frozenset[int]:
+    """The truth rooms a path of the robot's positions (n, 2) passes inside (None: all)."""
+    if path is None:
+        return frozenset(r.id for r in plan.rooms)
+    points = np.asarray(path, dtype=float).reshape(-1, 2)
+    return frozenset(
+        r.id for r in plan.rooms if inside_polygon(points, np.asarray(r.polygon, float)).any()
+    )
+
+
 @dataclass(frozen=True)
 class RoomScore:
     """Served rooms and doors against the truth's (see the module's doc)."""
 
     rooms: int
     truth_rooms: int
+    entered: frozenset[int]  # truth room ids the robot entered
     matched: dict[int, int]  # served room id -> truth room id
     ious: dict[int, float]  # truth room id -> the IoU of its match
     split: int
     doors: int
-    truth_doors: int
+    truth_doors: int  # between entered rooms
     doors_found: int
     doors_joined: int  # of those found, joining the right rooms
     centre_err: float  # m, the largest of the doors found
@@ -66,22 +80,33 @@ class RoomScore:
         """Served rooms matching no truth room and not part of a split."""
         return self.rooms - len(self.matched) - self.split
 
+    @property
+    def entered_ious(self) -> list[float]:
+        """The IoU of each entered room (0 for one not found)."""
+        return [self.ious.get(t, 0.0) for t in sorted(self.entered)]
+
     def summary(self) -> str:
         """One line for people."""
-        values = list(self.ious.values())
+        values = self.entered_ious
+        found = sum(v > 0 for v in values)
         ious = (
             f"IoU min {min(values):.2f}, median {statistics.median(values):.2f}" if values else "-"
         )
         return (
-            f"rooms {len(self.matched)} of {self.truth_rooms} found ({ious}), {self.false} false, "
-            f"{self.split} split; doors {self.doors_found} of {self.truth_doors} found, "
-            f"{self.doors_joined} joining the right rooms (centre within {self.centre_err:.2f} m, "
-            f"width within {self.width_err:.2f} m)"
+            f"rooms entered {found} of {len(values)} found ({ious}), {self.false} false, "
+            f"{self.split} split, {self.rooms} served; doors between them {self.doors_found} "
+            f"of {self.truth_doors} found, {self.doors_joined} joining the right rooms (centre "
+            f"within {self.centre_err:.2f} m, width within {self.width_err:.2f} m)"
         )
 
 
-def evaluate_rooms(body: dict[str, Any], plan: FloorPlan) -> RoomScore:
-    """The mapper's rooms reply (the contract's payload) against the plan's truth."""
+def evaluate_rooms(
+    body: dict[str, Any], plan: FloorPlan, path: ArrayLike | None = None
+) -> RoomScore:
+    """The mapper's rooms reply (the contract's payload) against the plan's truth.
+
+    ``path``: the robot's positions (n, 2), which say the rooms it entered (None: all).
+    """
     served = {r["id"]: np.asarray(r["polygon"], dtype=float) for r in body["rooms"]}
     truth = {t.id: np.asarray(t.polygon, dtype=float) for t in plan.rooms}
     pairs = sorted(
@@ -98,12 +123,33 @@ def evaluate_rooms(body: dict[str, Any], plan: FloorPlan) -> RoomScore:
         for i, mine in served.items()
         if i not in matched and any(_share_of(mine, truth[t]) >= MATCH_IOU for t in ious)
     )
+    inside = entered(plan, path)
+    doors = [d for d in plan.doors if len(d.rooms) == 2 and set(d.rooms) <= inside]
+    found, joined, centre, width = _doors(body["doors"], doors, matched)
+    return RoomScore(
+        rooms=len(served),
+        truth_rooms=len(truth),
+        entered=inside,
+        matched=matched,
+        ious=ious,
+        split=split,
+        doors=len(body["doors"]),
+        truth_doors=len(doors),
+        doors_found=found,
+        doors_joined=joined,
+        centre_err=centre,
+        width_err=width,
+    )
+
+
+def _doors(
+    served: list[dict[str, Any]], truth: list[Door], matched: dict[int, int]
+) -> tuple[int, int, float, float]:
+    """Truth doors found, found joining the right rooms, the largest centre and width errors."""
     found, joined, centre, width = 0, 0, [0.0], [0.0]
-    for door in plan.doors:
+    for door in truth:
         middle = (np.asarray(door.p0) + np.asarray(door.p1)) / 2
-        near = [
-            d for d in body["doors"] if np.hypot(*(np.asarray(d["center"]) - middle)) <= DOOR_REACH
-        ]
+        near = [d for d in served if np.hypot(*(np.asarray(d["center"]) - middle)) <= DOOR_REACH]
         if not near:
             continue
         d = min(near, key=lambda d: np.hypot(*(np.asarray(d["center"]) - middle)))
@@ -111,16 +157,4 @@ def evaluate_rooms(body: dict[str, Any], plan: FloorPlan) -> RoomScore:
         centre.append(float(np.hypot(*(np.asarray(d["center"]) - middle))))
         width.append(abs(d["width"] - float(np.hypot(*np.subtract(door.p1, door.p0)))))
         joined += sorted(matched.get(r, -1) for r in d["rooms"]) == sorted(door.rooms)
-    return RoomScore(
-        rooms=len(served),
-        truth_rooms=len(truth),
-        matched=matched,
-        ious=ious,
-        split=split,
-        doors=len(body["doors"]),
-        truth_doors=len(plan.doors),
-        doors_found=found,
-        doors_joined=joined,
-        centre_err=max(centre),
-        width_err=max(width),
-    )
+    return found, joined, max(centre), max(width)

@@ -38,7 +38,7 @@ def test_the_truth_itself_scores_perfectly_under_other_ids() -> None:
     assert (score.false, score.split) == (0, 0)
     assert (score.doors_found, score.doors_joined) == (1, 1)
     assert score.width_err == pytest.approx(0.1)
-    assert "rooms 2 of 2 found" in score.summary()
+    assert "rooms entered 2 of 2 found" in score.summary()
 
 
 def test_a_split_room_a_false_room_and_a_door_to_the_wrong_room() -> None:
@@ -53,3 +53,17 @@ def test_a_split_room_a_false_room_and_a_door_to_the_wrong_room() -> None:
     assert (score.split, score.false) == (1, 1)
     assert score.doors_found == 1
     assert score.doors_joined == 0
+
+
+def test_only_the_rooms_the_robot_entered_and_the_doors_between_them_are_asked_for() -> None:
+    path = [[1.0, 1.0], [2.0, 2.0]]  # in the first room only: the second glimpsed
+    body = {"rooms": [_room(3, SQUARE)], "doors": []}
+    score = evaluate_rooms(body, PLAN, path)
+    assert score.entered == {0}
+    assert score.entered_ious == [pytest.approx(1.0, abs=0.02)]
+    assert score.false == 0
+    assert score.truth_doors == 0  # the door leads to a room not entered
+    assert "rooms entered 1 of 1 found" in score.summary()
+    walked = evaluate_rooms(body, PLAN, [[1.0, 1.0], [6.0, 2.0]])
+    assert walked.entered_ious == [pytest.approx(1.0, abs=0.02), 0.0]
+    assert (walked.truth_doors, walked.doors_found) == (1, 0)
