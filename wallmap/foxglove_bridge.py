@@ -51,12 +51,18 @@ POSE = "/wallmap/pose"
 TF = "/tf"
 OBSERVATIONS = "/wallmap/observations"
 TRAJECTORY = "/wallmap/trajectory"
-LATCHED = (WALLS, TRAJECTORY)  # state rather than a stream: a viewer that connects late needs it
+ROOMS = "/wallmap/rooms"
+LATCHED = (WALLS, TRAJECTORY, ROOMS)  # state, not a stream: a viewer that connects late needs it
 
 CONFIRMED = Color(r=0.25, g=0.55, b=1.0, a=1.0)
 TENTATIVE = Color(r=1.0, g=0.6, b=0.1, a=0.6)  # possible phantoms: paler, so they stand out
 OBSERVED = Color(r=0.2, g=0.9, b=0.3, a=1.0)
 LABEL = Color(r=0.9, g=0.9, b=0.9, a=1.0)
+ROOM = Color(r=0.3, g=0.8, b=0.8, a=0.9)
+OPEN_ROOM = Color(r=0.3, g=0.8, b=0.8, a=0.45)  # not closed: partly explored, drawn paler
+DOOR = Color(r=1.0, g=0.3, b=0.8, a=1.0)
+ROOM_HEIGHT = 0.01  # m above the floor: outlines under the walls' lines
+DOOR_THICKNESS = 0.08  # m
 WALL_THICKNESS = 0.05  # m
 OBSERVATION_THICKNESS = 0.03  # m
 OBSERVATION_HEIGHT = 0.02  # m above the walls, so a seen wall is not hidden under its map line
@@ -79,6 +85,7 @@ def make_channels(context: Context) -> dict[str, Any]:
         TF: FrameTransformsChannel(TF, context=context),
         OBSERVATIONS: SceneUpdateChannel(OBSERVATIONS, context=context),
         TRAJECTORY: PosesInFrameChannel(TRAJECTORY, context=context),
+        ROOMS: SceneUpdateChannel(ROOMS, context=context),
     }
 
 
@@ -218,6 +225,61 @@ def observations_scene(obs: messages.Observations, pose: messages.Pose) -> Scene
     )
 
 
+def room_entity(room: dict[str, Any], ns: int, frame: str = "map") -> SceneEntity:
+    """A room of the rooms reply: its outline (closed loop), ``R<id> <area> m²``, its numbers."""
+    points = [Point3(x=float(x), y=float(y), z=ROOM_HEIGHT) for x, y in room["polygon"]]
+    keys = ("id", "area", "closed", "walls", "doors")
+    cx, cy = room["centroid"]
+    return SceneEntity(
+        timestamp=timestamp(ns),
+        frame_id=frame,
+        id=f"room/{int(room['id'])}",
+        metadata=[KeyValuePair(key=k, value=_text(room[k])) for k in keys],
+        lines=[
+            LinePrimitive(
+                type=LinePrimitiveLineType.LineLoop,
+                points=points,
+                color=ROOM if room["closed"] else OPEN_ROOM,
+                thickness=WALL_THICKNESS,
+            )
+        ],
+        texts=[
+            TextPrimitive(
+                pose=foxglove_pose(float(cx), float(cy), 0.0),
+                billboard=True,
+                font_size=16.0,
+                scale_invariant=True,
+                color=ROOM,
+                text=f"R{int(room['id'])} {float(room['area']):.1f} m²",
+            )
+        ],
+    )
+
+
+def door_entity(door: dict[str, Any], ns: int, frame: str = "map") -> SceneEntity:
+    """A door: its span from jamb to jamb, and its numbers (width, wall, the rooms it joins)."""
+    keys = ("id", "width", "wall", "rooms")
+    return SceneEntity(
+        timestamp=timestamp(ns),
+        frame_id=frame,
+        id=f"door/{int(door['id'])}",
+        metadata=[KeyValuePair(key=k, value=_text(door[k])) for k in keys],
+        lines=[_line_list([(door["p0"], door["p1"])], DOOR, DOOR_THICKNESS, ROOM_HEIGHT)],
+    )
+
+
+def rooms_scene(body: dict[str, Any], ns: int, frame: str = "map") -> SceneUpdate:
+    """The rooms reply as one scene update that stands alone, as ``walls_scene`` does.
+
+    Raises KeyError, TypeError or ValueError for a reply without the contract's fields.
+    """
+    return SceneUpdate(
+        deletions=[SceneEntityDeletion(timestamp=timestamp(ns), type=SceneEntityDeletionType.All)],
+        entities=[room_entity(r, ns, frame) for r in body["rooms"]]
+        + [door_entity(d, ns, frame) for d in body["doors"]],
+    )
+
+
 class Bridge:
     """Wallmap messages in, Foxglove messages out, keeping what the conversion needs to know.
 
@@ -266,6 +328,15 @@ class Bridge:
     def _walls(self, stamp: float) -> Out:
         ns = nanoseconds(stamp)
         return self._emit(WALLS, walls_scene(self.walls.values(), ns, self.frame), ns)
+
+    def rooms(self, body: dict[str, Any]) -> list[Out]:
+        """The rooms reply (fetched, or from ``map/rooms/updates``): every room and door again.
+
+        Raises KeyError, TypeError or ValueError for a reply without the contract's fields.
+        """
+        stamp = body.get("stamp")
+        ns = nanoseconds(float(stamp) if stamp is not None else 0.0)
+        return [self._emit(ROOMS, rooms_scene(body, ns, str(body.get("frame", self.frame))), ns)]
 
     def pose(self, pose: messages.Pose) -> list[Out]:
         """A robot pose: as a pose (an arrow) and as the transform map -> base_link."""

@@ -32,6 +32,7 @@ from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import Keys, open_session
 from wallmap.config import Config, to_toml
+from wallmap.map_client import fetch_rooms
 from wallmap.options import ZENOH, add_command
 
 EXTRA_MISSING = "the foxglove extra is not installed: pip install 'wallmap[foxglove]'"
@@ -192,17 +193,19 @@ class _Relay:
                 ("pose", keys.pose),
                 ("observations", keys.observations),
                 ("map", keys.map_updates),
+                ("rooms", keys.map_rooms_updates),
             )
         }
         token = session.liveliness().declare_token(keys.health(service))
         self._first_map(session, keys, subscribers["map"].handler)
+        self._first_rooms(session, keys)
         threads = [
             threading.Thread(target=self._forward, args=(sub.handler, kind), daemon=True)
             for kind, sub in subscribers.items()
         ]
         for thread in threads:
             thread.start()
-        self.log.info("relaying %s, %s and %s", keys.pose, keys.observations, keys.map_updates)
+        self.log.info("relaying %s", ", ".join(str(s.key_expr) for s in subscribers.values()))
         start = time.monotonic()
         while not stop.is_set():
             now = time.monotonic()
@@ -253,6 +256,15 @@ class _Relay:
                 pass  # refused, with its reason, where it is handled
             self.inbox.put(("map", payload))
 
+    def _first_rooms(self, session: zenoh.Session, keys: Keys) -> None:
+        """The rooms so far (a mapper segments them at most once a second, so they may lag)."""
+        try:
+            self._write(self.bridge.rooms(fetch_rooms(session, keys, timeout=2.0)))
+        except QueryError as err:
+            self.log.warning("%s: the rooms come with the mapper's updates", err)
+        except REFUSALS as err:
+            self.stats.refuse("rooms", str(err))
+
     def _handle(self, kind: str, payload: bytes | str) -> None:
         if isinstance(payload, str):  # a viewer subscribed to this latched topic
             out = self.bridge.latest.get(payload)
@@ -264,6 +276,8 @@ class _Relay:
                 outs = self.bridge.pose(unpack_pose(payload))
             elif kind == "observations":
                 outs = self.bridge.observations(unpack_observations(payload))
+            elif kind == "rooms":
+                outs = self.bridge.rooms(decode(payload))
             else:
                 outs = self.bridge.map_update(MapUpdate.from_map(decode(payload)))
         except REFUSALS as err:

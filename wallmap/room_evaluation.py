@@ -5,8 +5,9 @@ Rooms are matched one to one with the truth's by the IoU of their outlines (both
 missed, a served room left unmatched is false, two served rooms over one truth room (the second
 overlapping it by 0.3 or more of its own area) a split. What is asked of a map is the rooms the
 robot entered (its path passes inside them) and the doors between two of them: a room seen only
-through its door may be served, or not, and a door into nothing seen is not asked for. Doors are matched by centre, within 0.5 m; a matched door joins
-the right rooms when its rooms are the matches of the truth's.
+through its door may be served, or not, and a door into nothing seen is not asked for. Doors are
+matched by centre, within 0.5 m; a matched door joins the right rooms when its rooms are the
+matches of the truth's.
 """
 
 from __future__ import annotations

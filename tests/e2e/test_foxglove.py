@@ -27,6 +27,7 @@ SCHEMAS = {
     "/tf": "foxglove.FrameTransforms",
     "/wallmap/observations": "foxglove.SceneUpdate",
     "/wallmap/trajectory": "foxglove.PosesInFrame",
+    "/wallmap/rooms": "foxglove.SceneUpdate",
 }
 
 
@@ -160,7 +161,7 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
             # Written as they come, in the order of their stamps; a player sends each frame's own
             # pose after the poses ahead of it (MCAP's index orders them by log time).
             assert times == sorted(times), topic
-        if topic != "/wallmap/walls":
+        if topic not in ("/wallmap/walls", "/wallmap/rooms"):
             assert len(set(times)) == len(times), topic  # ...one per stamp
     pose_time, pose = messages["/wallmap/pose"][-1]
     assert stamp_ns(pose) == pose_time  # log time = the message's stamp
@@ -173,6 +174,13 @@ def test_record_a_playback_then_serve_the_map_live(stack: Stack, tmp_path: Path)
         if {"key": ["tentative"], "value": ["false"]} in e["metadata"]
     }
     assert confirmed == {f"wall/{w['id']}" for w in served}
+    rooms = stack.query("--rooms")  # the rooms the mapper serves, as the last update drew them
+    _, last_rooms = messages["/wallmap/rooms"][-1]
+    assert rooms["rooms"], "a room in 120 frames of a three-room scene"
+    assert {one(e, "id") for e in last_rooms["entities"]} == {
+        *(f"room/{r['id']}" for r in rooms["rooms"]),
+        *(f"door/{d['id']}" for d in rooms["doors"]),
+    }
 
     # The same map, live. The first viewer gets it from the server's first query (or from the
     # resend, if it subscribes after that); the second, long after, only from the resend.

@@ -147,3 +147,32 @@ def test_observations_are_placed_with_the_pose_at_their_stamp() -> None:
     assert points(9.0)[0] == (2.0, 1.0, 0.02)  # beyond every pose: the latest stands in
     (out,) = bridge.observations(_obs(0.2))
     assert _fox(out.message)["entities"][0]["lines"] == []  # a frame without walls clears them
+
+
+def test_rooms_are_outlines_labelled_with_id_and_area_and_doors_are_spans() -> None:
+    fb = pytest.importorskip("wallmap.foxglove_bridge")
+    square = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
+    room = {"id": 3, "polygon": square, "area": 16.0, "centroid": [2.0, 2.0], "walls": [1, 2]}
+    room |= {"doors": [0], "closed": True}
+    door = {"id": 0, "center": [4.0, 2.0], "width": 1.0, "p0": [4.0, 1.5], "p1": [4.0, 2.5]}
+    door |= {"wall": 2, "rooms": [3]}
+    body = {"v": 1, "frame": "map", "stamp": 5.0, "rooms": [room], "doors": [door]}
+    (out,) = fb.Bridge().rooms(body)
+    assert (out.topic, out.log_time) == ("/wallmap/rooms", 5_000_000_000)
+    scene = _fox(out.message)
+    assert one(one(scene, "deletions"), "type") == 1  # ALL: the message replaces the scene
+    room, door = scene["entities"]
+    assert (one(room, "id"), one(door, "id")) == ("room/3", "door/0")
+    assert one(one(room, "texts"), "text") == "R3 16.0 m²"
+    (outline,) = room["lines"]
+    assert one(outline, "type") == 1  # LINE_LOOP: the outline closes on itself
+    assert [_xyz(p)[:2] for p in outline["points"]] == [tuple(p) for p in square]
+    metadata = {one(kv, "key"): one(kv, "value") for kv in room["metadata"]}
+    assert (metadata["area"], metadata["closed"], metadata["walls"]) == ("16.0", "true", "[1, 2]")
+    assert [_xyz(p)[:2] for p in one(door, "lines")["points"]] == [(4.0, 1.5), (4.0, 2.5)]
+
+
+def test_a_rooms_reply_without_the_contract_fields_is_refused() -> None:
+    fb = pytest.importorskip("wallmap.foxglove_bridge")
+    with pytest.raises(KeyError):
+        fb.Bridge().rooms({"rooms": [{"id": 1}], "doors": []})
