@@ -72,50 +72,60 @@ def touches_border(labels: NDArray[np.int32], n: int) -> NDArray[np.bool_]:
 
 
 def outline(mask: Mask) -> Array:
-    """The outer boundary of ``mask``'s cells, counter-clockwise, in cell units (corners).
+    """The outer boundary of ``mask``'s cells, counter-clockwise, in cell units (its corners).
 
     Cell (i, j) spans [i, i+1] x [j, j+1]. Boundary edges are chained with the region on their
     left; where two loops touch at a corner the sharper left turn is taken, so loops stay apart.
-    Of the loops, the one of largest area is the outer boundary (holes run clockwise).
+    Of the loops, the one of largest area is the outer boundary (holes run clockwise). Edges in
+    a straight line are joined first (``_straight_edges``): a loop is walked corner to corner.
     """
     m = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), dtype=bool)
     m[1:-1, 1:-1] = mask
     nxt: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    # x = i (rows), y = j (columns); region on the left of each directed edge.
-    i, j = np.nonzero(m[1:, :] & ~m[:-1, :])  # cell (i+1, j) in, (i, j) out: edge at x = i+1
-    _edges(nxt, i + 1, j + 1, i + 1, j, -1)
-    i, j = np.nonzero(m[:-1, :] & ~m[1:, :])  # cell (i, j) in, (i+1, j) out: edge at x = i+1
-    _edges(nxt, i + 1, j, i + 1, j + 1, -1)
-    i, j = np.nonzero(m[:, 1:] & ~m[:, :-1])  # cell (i, j+1) in, (i, j) out: edge at y = j+1
-    _edges(nxt, i, j + 1, i + 1, j + 1, -1)
-    i, j = np.nonzero(m[:, :-1] & ~m[:, 1:])  # cell (i, j) in, (i, j+1) out: edge at y = j+1
-    _edges(nxt, i + 1, j + 1, i, j + 1, -1)
+    # x = i (rows), y = j (columns), in padded corner units; region on the left of each edge;
+    # each unit edge given by its lower corner along its line.
+    i, j = np.nonzero(m[1:, :] & ~m[:-1, :])  # cell (i+1, j) in, (i, j) out: at x = i+1, -y
+    _straight_edges(nxt, i + 1, j, axis=1, step=-1)
+    i, j = np.nonzero(m[:-1, :] & ~m[1:, :])  # cell (i, j) in, (i+1, j) out: at x = i+1, +y
+    _straight_edges(nxt, i + 1, j, axis=1, step=1)
+    i, j = np.nonzero(m[:, 1:] & ~m[:, :-1])  # cell (i, j+1) in, (i, j) out: at y = j+1, +x
+    _straight_edges(nxt, i, j + 1, axis=0, step=1)
+    i, j = np.nonzero(m[:, :-1] & ~m[:, 1:])  # cell (i, j) in, (i, j+1) out: at y = j+1, -x
+    _straight_edges(nxt, i, j + 1, axis=0, step=-1)
     best, best_area = np.zeros((0, 2)), 0.0
     while nxt:
         loop = _walk(nxt)
         area = polygon_area(loop)
         if area > best_area:
             best, best_area = loop, area
-    return best
+    return best - 1.0  # the padding
 
 
-def _edges(
+def _straight_edges(
     nxt: dict[tuple[int, int], list[tuple[int, int]]],
-    x0: NDArray[np.int64],
-    y0: NDArray[np.int64],
-    x1: NDArray[np.int64],
-    y1: NDArray[np.int64],
-    shift: int,
+    x: NDArray[np.int64],
+    y: NDArray[np.int64],
+    axis: int,
+    step: int,
 ) -> None:
-    """Directed edges (x0, y0) -> (x1, y1) in padded corner units, shifted back by ``shift``."""
-    for a, b, c, d in zip(
-        (x0 + shift).tolist(),
-        (y0 + shift).tolist(),
-        (x1 + shift).tolist(),
-        (y1 + shift).tolist(),
-        strict=True,
-    ):
-        nxt.setdefault((a, b), []).append((c, d))
+    """Unit edges from (x, y), one along ``axis`` by ``step`` each, joined into straight runs.
+
+    A corner inside a run is never a corner of another edge (cells on either side of the line
+    are in on one side and out on the other all along), so the join loses no junction.
+    """
+    line, along = (x, y) if axis == 1 else (y, x)
+    order = np.lexsort((along, line))
+    line, along = line[order], along[order]
+    breaks = np.flatnonzero((np.diff(line) != 0) | (np.diff(along) != 1)) + 1
+    first = np.concatenate([[0], breaks]).astype(np.int64)
+    last = np.concatenate([breaks - 1, [len(line) - 1]]).astype(np.int64)
+    if not len(line):
+        return
+    lo, hi = along[first], along[last] + 1  # a run's corners along its line
+    start, end = (lo, hi) if step > 0 else (hi, lo)
+    for k, a, b in zip(line[first].tolist(), start.tolist(), end.tolist(), strict=True):
+        p, q = ((k, a), (k, b)) if axis == 1 else ((a, k), (b, k))
+        nxt.setdefault(p, []).append(q)
 
 
 def _walk(nxt: dict[tuple[int, int], list[tuple[int, int]]]) -> Array:

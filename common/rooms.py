@@ -29,6 +29,7 @@ and the benchmarks share it. Ids are not given here (``services.mapper.room_map`
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -161,6 +162,25 @@ class _Ends:
     b: Array  # (s, 2) ...and second
     feet: Array  # (e, s, 2) each end's nearest point on each segment
 
+    @functools.cached_property
+    def targets(self) -> tuple[Array, Array, Array]:
+        """What each end may open onto, once for every search (``_nearest_ahead``).
+
+        Per end, every segment's two ends and its foot on it (e, 3s, 2); their distances, and
+        the cosines of their directions with the end's outward one (e, 3s), inf and -inf for
+        its own segment's.
+        """
+        ends = [np.broadcast_to(end, self.feet.shape) for end in (self.a, self.b)]
+        points = np.concatenate([*ends, self.feet], axis=1)
+        own = np.tile(np.arange(len(self.a)), 3)[None] == self.piece[:, None]
+        rel = points - self.point[:, None]
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosine = np.einsum("nmk,nk->nm", rel, self.outward) / dist
+        dist[own | (dist <= 1e-6)] = np.inf
+        cosine[own] = -np.inf
+        return points, dist, cosine
+
 
 def _feet(points: Array, a: Array, b: Array) -> Array:
     """Each point's nearest point on each segment: (n, s, 2)."""
@@ -212,11 +232,11 @@ def openings(
     reach = config.door_max if reach is None else reach
     cos_max = math.cos(math.radians(config.door_angle if angle is None else angle))
     targets = _nearest_ahead(ends, reach, cos_max)
+    ahead = np.flatnonzero(np.isfinite(targets[:, 0]))
+    crossing = _crossing(ends.point[ahead], targets[ahead], ends.a, ends.b, ends.piece[ahead])
     found: dict[tuple[float, ...], Opening] = {}
-    for k in np.flatnonzero(np.isfinite(targets[:, 0])).tolist():
+    for k in ahead[~crossing].tolist():
         point, target = ends.point[k], targets[k]
-        if _crosses_walls(point, target, ends.a, ends.b, int(ends.piece[k])):
-            continue
         key = tuple(np.round(np.concatenate(sorted([point, target], key=tuple)), 2).tolist())
         found.setdefault(key, Opening(int(ends.wall[k]), point.copy(), target))
     return list(found.values())
@@ -242,12 +262,14 @@ def _facing_ends(ends: _Ends, config: RoomsConfig, used: set[tuple[float, ...]])
         back = -np.einsum("ijk,jk->ij", gap, ends.outward) / dist
     ok = (dist > config.door_max) & (dist <= config.passage_max)
     ok &= (towards >= cos_min) & (back >= cos_min) & np.triu(np.ones_like(ok), 1).astype(bool)
+    pairs = np.argwhere(ok)
+    crossing = _crossing(
+        ends.point[pairs[:, 0]], ends.point[pairs[:, 1]], ends.a, ends.b, ends.piece[pairs[:, 0]]
+    )
     found = []
-    for i, j in np.argwhere(ok).tolist():
+    for i, j in pairs[~crossing].tolist():
         p, q = ends.point[i], ends.point[j]
-        if {_end_key(p), _end_key(q)} & used:
-            continue
-        if not _crosses_walls(p, q, ends.a, ends.b, int(ends.piece[i])):
+        if not {_end_key(p), _end_key(q)} & used:
             found.append(Opening(int(ends.wall[i]), p.copy(), q.copy()))
             used |= {_end_key(p), _end_key(q)}
     return found
@@ -259,24 +281,12 @@ def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
     A segment's ends or the foot on it, within ``reach``, at most ``acos(cos_max)`` off the
     end's outward direction.
     """
-    a, b = ends.a, ends.b
     n = len(ends.point)
     if not n:
         return np.zeros((0, 2))
-    feet = ends.feet
-    points = np.concatenate(
-        [np.broadcast_to(a, feet.shape), np.broadcast_to(b, feet.shape), feet], axis=1
-    )
-    owner = np.tile(np.arange(len(a)), 3)
-    rel = points - ends.point[:, None]
-    dist = np.hypot(rel[..., 0], rel[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cosine = np.einsum("nmk,nk->nm", rel, ends.outward) / dist
-    ok = (
-        (owner[None] != ends.piece[:, None]) & (dist > 1e-6) & (dist <= reach) & (cosine >= cos_max)
-    )
-    dist = np.where(ok, dist, np.inf)
-    best = np.argmin(dist, axis=1)
+    points, dist, cosine = ends.targets
+    ok = (dist <= reach) & (cosine >= cos_max)
+    best = np.argmin(np.where(ok, dist, np.inf), axis=1)
     out = points[np.arange(n), best].copy()
     out[~ok.any(axis=1)] = np.nan
     return out
@@ -292,17 +302,18 @@ def _ends_of(spans: Sequence[Opening]) -> set[tuple[float, ...]]:
     return {_end_key(p) for s in spans for p in (s.p0, s.p1)}
 
 
-def _crosses_walls(p: Array, q: Array, a: Array, b: Array, own: int) -> bool:
-    """Whether the span p-q passes through a segment other than ``own`` (ends touching aside)."""
-    d = q - p
-    e = b - a
-    denom = d[0] * e[:, 1] - d[1] * e[:, 0]
+def _crossing(p: Array, q: Array, a: Array, b: Array, own: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Per span p[k]-q[k]: does it pass through a segment other than ``own[k]`` (ends aside)?"""
+    d = (q - p)[:, None]  # (k, 1, 2)
+    e = (b - a)[None]  # (1, s, 2)
+    w = a[None] - p[:, None]  # (k, s, 2)
+    denom = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = ((a[:, 0] - p[0]) * e[:, 1] - (a[:, 1] - p[1]) * e[:, 0]) / denom
-        u = ((a[:, 0] - p[0]) * d[1] - (a[:, 1] - p[1]) * d[0]) / denom
-    inner = (s > 0.02) & (s < 0.98) & (u > 0.02) & (u < 0.98)
-    inner[own] = False
-    return bool(inner.any())
+        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / denom
+        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / denom
+    inner = (t > 0.02) & (t < 0.98) & (u > 0.02) & (u < 0.98)
+    inner[np.arange(len(p)), own] = False
+    return inner.any(axis=1)
 
 
 class _Grid:
@@ -338,19 +349,25 @@ class _Grid:
         return idx[..., 0].clip(0, self.shape[0] - 1), idx[..., 1].clip(0, self.shape[1] - 1), ok
 
     def draw(self, mask: NDArray[np.bool_], p: Array, q: Array, radius: float) -> None:
-        """Mark the cells whose centres lie within ``radius`` of segment p-q."""
+        """Mark the cells whose centres lie within ``radius`` of a segment p[k]-q[k] (k, 2).
+
+        All segments at once: each one's box of cells, listed end to end, tested together.
+        """
+        p, q = np.asarray(p, dtype=float).reshape(-1, 2), np.asarray(q, dtype=float).reshape(-1, 2)
         lo = np.floor((np.minimum(p, q) - radius) / self.cell).astype(np.int64) - self.origin
         hi = np.floor((np.maximum(p, q) + radius) / self.cell).astype(np.int64) - self.origin
         lo, hi = np.maximum(lo, 0), np.minimum(hi, np.array(self.shape) - 1)
-        if (hi < lo).any():
-            return
-        ii, jj = np.meshgrid(
-            np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"
-        )
+        size = np.maximum(hi - lo + 1, 0)  # (k, 2): cells along i and j
+        count = size[:, 0] * size[:, 1]
+        seg = np.repeat(np.arange(len(p)), count)
+        rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+        ii = lo[seg, 0] + rank // np.maximum(size[seg, 1], 1)
+        jj = lo[seg, 1] + rank % np.maximum(size[seg, 1], 1)
         c = self.centres(ii, jj)
-        seg = q - p
-        t = np.clip(((c - p) @ seg) / max(float(seg @ seg), 1e-12), 0.0, 1.0)
-        near = np.hypot(*(c - (p + t[..., None] * seg)).transpose(2, 0, 1)) <= radius
+        d = q - p
+        t = np.einsum("nk,nk->n", c - p[seg], d[seg]) / np.maximum((d**2).sum(axis=1), 1e-12)[seg]
+        foot = p[seg] + np.clip(t, 0.0, 1.0)[:, None] * d[seg]
+        near = np.hypot(*(c - foot).T) <= radius
         mask[ii[near], jj[near]] = True
 
 
@@ -364,15 +381,13 @@ def find_rooms(
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
     barrier = np.zeros(grid.shape, dtype=bool)
-    for wall in walls:
-        for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
-            grid.draw(barrier, p, q, radius)
     ends = _free_ends(walls, config.joint)
+    grid.draw(barrier, ends.a, ends.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
     spans += _divider_spans(grid, ends, spans, config)
-    for span in [*spans, *_blind_spans(grid, ends, spans, config)]:
-        grid.draw(barrier, span.p0, span.p1, radius)
+    shut = [*spans, *_blind_spans(grid, ends, spans, config)]
+    grid.draw(barrier, np.array([o.p0 for o in shut]), np.array([o.p1 for o in shut]), radius)
     labels, rooms = _regions(grid, barrier, config)
     for k, closed in enumerate(rooms):
         if not closed:
@@ -562,27 +577,39 @@ def _bounding_walls(
     shapes: list[RoomShape],
     radius: float,
 ) -> None:
-    """Each room's walls: those with a share of their length facing its cells."""
+    """Each room's walls: those with a share of their length facing its cells.
+
+    Each segment is sampled every 20 cm (from a tenth to nine tenths of it) and looked at from
+    both sides, just past the barrier; a wall bounds a room whose cells are in front of a fifth
+    of its samples (two at least).
+    """
     reach = radius + 1.5 * grid.cell
-    for wall in walls:
-        hits: dict[int, int] = {}
-        total = 0
-        for p, q in np.asarray(wall.segments, dtype=float).reshape(-1, 2, 2):
-            length = float(np.hypot(*(q - p)))
-            if length < 1e-9:
-                continue
-            normal = np.array([p[1] - q[1], q[0] - p[0]]) / length
-            t = np.linspace(0.1, 0.9, max(2, int(length / 0.2)))[:, None]
-            along = p + t * (q - p)
-            for side in (normal, -normal):
-                i, j, ok = grid.local(along + reach * side)
-                rooms = labels[i[ok], j[ok]]
-                for room in rooms[rooms >= 0].tolist():
-                    hits[room] = hits.get(room, 0) + 1
-            total += len(along)
-        for room, count in hits.items():
-            if count >= max(2, 0.2 * total):
-                shapes[room].walls.append(wall.id)
+    pieces = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
+    if not shapes or not sum(len(piece) for piece in pieces):
+        return
+    owner = np.concatenate([np.full(len(piece), k) for k, piece in enumerate(pieces)])
+    a, b = np.concatenate(pieces)[:, 0], np.concatenate(pieces)[:, 1]
+    length = np.hypot(*(b - a).T)
+    real = length >= 1e-9
+    a, b, length, owner = a[real], b[real], length[real], owner[real]
+    n = np.maximum(2, (length / 0.2).astype(np.int64))
+    seg = np.repeat(np.arange(len(a)), n)
+    rank = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    t = 0.1 + 0.8 * rank / (n[seg] - 1)
+    along = a[seg] + t[:, None] * (b - a)[seg]
+    normal = np.stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0]], axis=1) / length[:, None]
+    rooms = len(shapes)
+    hits = np.zeros(len(walls) * rooms, dtype=np.int64)
+    for side in (1.0, -1.0):
+        i, j, ok = grid.local(along + side * reach * normal[seg])
+        room = labels[i, j]
+        ok &= room >= 0
+        hits += np.bincount(owner[seg][ok] * rooms + room[ok], minlength=len(hits))
+    total = np.bincount(owner, weights=n, minlength=len(walls))
+    for k, room in np.argwhere(
+        hits.reshape(len(walls), rooms) >= np.maximum(2, 0.2 * total)[:, None]
+    ).tolist():
+        shapes[room].walls.append(walls[k].id)
 
 
 def _door(

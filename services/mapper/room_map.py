@@ -112,8 +112,8 @@ class _Kept:
 
 
 def _keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Cells (i, j) as single sortable integers."""
-    return np.unique((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
+    """Cells (i, j), each once, as single integers, sorted."""
+    return np.sort((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
 
 
 def _pack(keys: NDArray[np.int64]) -> str:
@@ -141,6 +141,11 @@ def _greedy(pairs: list[tuple[float, int, int]]) -> dict[int, int]:
 
 def _pt(p: Array) -> tuple[float, float]:
     return (round(float(p[0]), 3), round(float(p[1]), 3))
+
+
+def _pts(points: Array) -> tuple[tuple[float, float], ...]:
+    """Points to the millimetre, as the contract's lists of pairs."""
+    return tuple((x, y) for x, y in np.round(np.asarray(points, dtype=float), 3).tolist())
 
 
 @dataclass
@@ -219,7 +224,7 @@ class RoomMap:
         rooms = tuple(
             RoomRecord(
                 id=room_ids[k],
-                polygon=tuple(_pt(p) for p in r.polygon),
+                polygon=_pts(r.polygon),
                 area=round(r.area, 3),
                 centroid=_pt(r.centroid),
                 walls=tuple(sorted(r.walls)),

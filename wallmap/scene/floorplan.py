@@ -259,12 +259,13 @@ def clearance(plan: FloorPlan, points: np.ndarray) -> np.ndarray:
 def free_rays(plan: FloorPlan, at: np.ndarray, n: int = 90, reach: float = 6.0) -> np.ndarray:
     """Where ``n`` rays from ``at``, all round, end on walls that return depth (not glass).
 
-    Relative to ``at``; a ray meeting nothing within ``reach`` (m) is left out, as a sensor
-    reports no return. The free floor a robot at ``at`` sees, for tests of the room finder.
+    Relative to ``at``; a ray meeting nothing within ``reach`` (m), or glass first, is left
+    out, as a depth sensor reports no return through glass. The free floor a robot at ``at``
+    sees, for tests of the room finder.
     """
-    solid = [w for w in plan.walls if not w.glass]
-    a = np.array([w.p0 for w in solid])
-    e = np.array([w.p1 for w in solid]) - a
+    a = np.array([w.p0 for w in plan.walls])
+    e = np.array([w.p1 for w in plan.walls]) - a
+    glass = np.array([w.glass for w in plan.walls])
     ends = []
     for angle in np.linspace(-np.pi, np.pi, n, endpoint=False):
         d = np.array([np.cos(angle), np.sin(angle)])
@@ -274,7 +275,9 @@ def free_rays(plan: FloorPlan, at: np.ndarray, n: int = 90, reach: float = 6.0) 
             u = ((a[:, 0] - at[0]) * d[1] - (a[:, 1] - at[1]) * d[0]) / denom
         hit = (s > 0) & (u >= 0) & (u <= 1) & (s <= reach)
         if hit.any():
-            ends.append(s[hit].min() * d)
+            first = np.flatnonzero(hit)[np.argmin(s[hit])]
+            if not glass[first]:
+                ends.append(s[first] * d)
     return np.array(ends).reshape(-1, 2)
 
 

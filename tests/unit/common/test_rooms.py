@@ -99,3 +99,48 @@ def test_an_open_plan_passage_wider_than_a_door_is_a_door_between_two_rooms() ->
     (door,) = layout.doors
     assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(3.0, abs=0.05)
     assert door.rooms == (0, 1)
+
+
+def _two_rooms(divider: list[Wall]) -> list[Wall]:
+    """Two 6 x 4 m rooms side by side (x from 0 to 12.1), divided at x = 6.05 by ``divider``.
+
+    The divider runs down the middle of a column of cells, as a wall seldom lies on a cell's
+    edge: floor right beside it, seen by rays along it, is then not the divider's own cells.
+    """
+    corners = [(0.0, 0.0), (12.1, 0.0), (12.1, 4.0), (0.0, 4.0)]
+    sides = zip(corners, corners[1:] + corners[:1], strict=True)
+    return [Wall(k, p, q) for k, (p, q) in enumerate(sides)] + divider
+
+
+def _through_the_door(y: float) -> np.ndarray:
+    """A drive from one room into the other through a door at height ``y`` of the divider."""
+    return np.array(
+        [[1.0 + 0.1 * k, 2.0] for k in range(40)]
+        + [[5.0 + 0.3 * k, y] for k in range(7)]
+        + [[7.0 + 0.1 * k, 2.0] for k in range(40)]
+    )
+
+
+def test_a_divider_glass_beyond_its_door_divides_and_the_door_is_where_the_robot_went() -> None:
+    """Solid from the floor's edge to the door, glass from the door to the far wall (unmapped).
+
+    The span from the solid piece's end to the far wall is 3 m, too wide for a door; the robot
+    crossed its first metre, and nothing was seen through the rest.
+    """
+    solid, glass = Wall(4, (6.05, 0.0), (6.05, 1.0)), Wall(5, (6.05, 2.0), (6.05, 4.0), glass=True)
+    plan = FloorPlan(walls=tuple(_two_rooms([solid, glass])))
+    mapped = [w for w in plan.walls if not w.glass]
+    layout = find_rooms(_walls(mapped), _seen(plan, _through_the_door(1.5)))
+    assert sorted(round(room.area) for room in layout.rooms) == [24, 24]
+    (door,) = layout.doors
+    assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(1.0, abs=0.2)
+    assert np.mean([door.p0, door.p1], axis=0) == pytest.approx([6.05, 1.5], abs=0.15)
+
+
+def test_a_span_seen_free_all_along_or_from_a_short_stub_divides_nothing() -> None:
+    """The same 3 m span, crossed all along (open floor); then from a 0.5 m stub (a pillar)."""
+    for divider in ([Wall(4, (6.05, 0.0), (6.05, 1.0))], [Wall(4, (6.05, 0.5), (6.05, 1.0))]):
+        plan = FloorPlan(walls=tuple(_two_rooms(divider)))
+        route = np.concatenate([_through_the_door(y) for y in (1.5, 2.5, 3.5)])
+        layout = find_rooms(_walls(list(plan.walls)), _seen(plan, route))
+        assert [round(room.area) for room in layout.rooms] == [48], divider
