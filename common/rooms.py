@@ -506,16 +506,18 @@ def _fill_open(
     )
     box_labels = labels[bi, bj]
     open_floor = inside & ((box_labels < 0) | (box_labels == k)) & ~barrier[bi, bj]
-    # Only what the room reaches within its hull without crossing a wall: not the space
-    # behind one of its walls that the hull happens to span.
-    parts, _ = label(open_floor)
-    reached = np.unique(parts[(box_labels == k) & (parts >= 0)])
-    near_mine = _dilate(box_labels == k, round(reach / grid.cell))
-    take = np.isin(parts, reached) & (box_labels < 0) & near_mine
+    # Only what the room reaches within its hull without crossing a wall, and within ``reach``
+    # along the floor: not the space behind one of its walls that the hull happens to span,
+    # nor floor round the end of a wall the map does not have yet.
+    reached = _dilate(box_labels == k, round(reach / grid.cell), within=open_floor)
+    take = reached & (box_labels < 0)
     labels[bi[take], bj[take]] = k
 
 
-def _dilate(mask: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
+def _dilate(
+    mask: NDArray[np.bool_], steps: int, within: NDArray[np.bool_] | None = None
+) -> NDArray[np.bool_]:
+    """``mask`` grown ``steps`` cells (4-neighbours), through ``within`` cells only if given."""
     out = mask.copy()
     for _ in range(steps):
         grown = out.copy()
@@ -523,6 +525,8 @@ def _dilate(mask: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
         grown[:-1] |= out[1:]
         grown[:, 1:] |= out[:, :-1]
         grown[:, :-1] |= out[:, 1:]
+        if within is not None:
+            grown &= within | mask
         out = grown
     return out
 
