@@ -380,15 +380,22 @@ def find_rooms(
     if not grid.free.any():
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
-    barrier = np.zeros(grid.shape, dtype=bool)
+    base = np.zeros(grid.shape, dtype=bool)
     ends = _free_ends(walls, config.joint)
-    grid.draw(barrier, ends.a, ends.b, radius)
+    grid.draw(base, ends.a, ends.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
-    spans += _divider_spans(grid, ends, spans, config)
-    shut = [*spans, *_blind_spans(grid, ends, spans, config)]
-    grid.draw(barrier, np.array([o.p0 for o in shut]), np.array([o.p1 for o in shut]), radius)
+    dividers = _divider_spans(grid, ends, spans, config)
+    _draw_spans(grid, base, [*spans, *_blind_spans(grid, ends, spans + dividers, config)], radius)
+    barrier = base.copy()
+    _draw_spans(grid, barrier, dividers, radius)
     labels, rooms = _regions(grid, barrier, config)
+    kept = [d for d in dividers if _divides(grid, labels, d, radius, config.door_min)]
+    if len(kept) < len(dividers):  # one that divides no two rooms is no divider: without it
+        barrier = base
+        _draw_spans(grid, barrier, kept, radius)
+        labels, rooms = _regions(grid, barrier, config)
+    spans += kept
     for k, closed in enumerate(rooms):
         if not closed:
             _fill_open(grid, labels, barrier, k, config.fill_reach)
@@ -407,6 +414,22 @@ def find_rooms(
     return Layout(shapes, doors)
 
 
+def _draw_spans(
+    grid: _Grid, barrier: NDArray[np.bool_], spans: list[Opening], radius: float
+) -> None:
+    """Spans closed: drawn into ``barrier``."""
+    grid.draw(barrier, np.array([o.p0 for o in spans]), np.array([o.p1 for o in spans]), radius)
+
+
+def _divides(
+    grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float, door_min: float
+) -> bool:
+    """Whether the door part of a divider's span has two different rooms on its two sides."""
+    p0, p1 = door_span(grid, span, door_min)
+    sides = _sides(grid, labels, Opening(span.wall, p0, p1), radius)
+    return min(sides) >= 0 and sides[0] != sides[1]
+
+
 def _divider_spans(
     grid: _Grid, ends: _Ends, spans: list[Opening], config: RoomsConfig
 ) -> list[Opening]:
@@ -416,7 +439,8 @@ def _divider_spans(
     ``passage_max`` long, from a piece of wall ``divider_min`` long or more: a door candidate
     when the robot or its rays crossed part of it and an end of it, ``door_min`` or more, was
     never seen (``door_span`` finds the door). A span seen free all along is open floor, not
-    a divider, and stays open.
+    a divider, and stays open. Whether it divides two rooms is known only once the floor is
+    divided (``find_rooms`` keeps those that do).
     """
     used = _ends_of(spans)
     length = np.hypot(*(ends.b - ends.a).T)
@@ -625,14 +649,7 @@ def _door(
     i, j, ok = grid.local(along)
     if not grid.free[i[ok], j[ok]].any() and not _free_near(grid, along):
         return None  # never crossed: glass or a niche, wall for the rooms
-    d = span.p1 - span.p0
-    normal = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-12)
-    sides: list[int] = []
-    for side in (normal, -normal):
-        i, j, ok = grid.local(along + (radius + 2.5 * grid.cell) * side)
-        found = labels[i[ok], j[ok]]
-        found = found[found >= 0]
-        sides.append(int(np.bincount(found).argmax()) if len(found) else -1)
+    sides, normal = _sides(grid, labels, span, radius), _normal(span)
     sides_dir = normal if sides[0] < 0 else -normal
     if sides[0] == sides[1] or max(sides) < 0:
         return None
@@ -668,6 +685,24 @@ def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array
         return span.p0, span.p1
     lo, hi = (t[run[0]], 1.0) if before > after else (0.0, t[run[-1]])
     return span.p0 + lo * (span.p1 - span.p0), span.p0 + hi * (span.p1 - span.p0)
+
+
+def _normal(span: Opening) -> Array:
+    d = span.p1 - span.p0
+    return np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-12)
+
+
+def _sides(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> list[int]:
+    """The room on each side of a span (-1: none): most of its labels just past the barrier."""
+    along = span.p0 + np.linspace(0.2, 0.8, 5)[:, None] * (span.p1 - span.p0)
+    normal = _normal(span)
+    sides: list[int] = []
+    for side in (normal, -normal):
+        i, j, ok = grid.local(along + (radius + 2.5 * grid.cell) * side)
+        found = labels[i[ok], j[ok]]
+        found = found[found >= 0]
+        sides.append(int(np.bincount(found).argmax()) if len(found) else -1)
+    return sides
 
 
 def _free_near(grid: _Grid, points: Array) -> bool:

@@ -139,4 +139,4 @@ def test_a_glass_stretch_in_a_wall_is_one_wall_and_no_door(tmp_path) -> None:
     (room,) = body["rooms"]["rooms"]
     assert room["closed"]
     assert room["area"] == pytest.approx(60.0, rel=0.03)
-    assert "rooms 1 of 1 found" in done.stdout
+    assert "rooms entered 1 of 1 found" in done.stdout
