@@ -20,7 +20,7 @@ import os
 import statistics
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -192,6 +192,27 @@ def rooms_row(kind: str, poses: str, results: Sequence[Result]) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def print_table(
+    columns: str,
+    kinds: Sequence[str],
+    poses: Sequence[str],
+    results: Sequence[Result],
+    row: Callable[[str, str, Sequence[Result]], str],
+) -> None:
+    """A markdown table, one ``row`` per scene kind and pose source after scene and poses."""
+    print(f"| scene | poses | {columns} |")
+    print("|---|---|" + "---|" * (columns.count("|") + 1))
+    for kind in kinds:
+        for pose_source in poses:
+            print(
+                row(
+                    kind,
+                    pose_source,
+                    [r for r in results if (r.kind, r.poses) == (kind, pose_source)],
+                )
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=600, help="frames per scene (600)")
@@ -251,27 +272,17 @@ def main() -> None:
     assumed = "default" if args.detector_noise_k is None else f"{args.detector_noise_k:g}"
     print(f"Seeds {','.join(map(str, seeds))}, up to {frames} frames per scene, ", end="")
     print(f"detector noise_k {assumed}, odometry drift {args.odom_drift}.\n")
-    print(
-        "| scene | poses | precision | recall | dups | angle ° | offset cm | end pt cm "
-        "| mapped/true | frames | s |"
+    columns = (
+        "precision | recall | dups | angle ° | offset cm | end pt cm | mapped/true | frames | s"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for kind in kinds:
-        for pose_source in poses:
-            rows = [r for r in results if (r.kind, r.poses) == (kind, pose_source)]
-            print(table_row(kind, pose_source, rows))
+    print_table(columns, kinds, poses, results, table_row)
     with_rooms = [k for k in kinds if any(r.rooms for r in results if r.kind == k)]
     if with_rooms:
         print(f"\n{ROOMS_HEADER}\n")
-        print(
-            "| scene | poses | entered | IoU min | IoU median | false | split | doors | joined "
-            "| centre m | width m |"
+        columns = (
+            "entered | IoU min | IoU median | false | split | doors | joined | centre m | width m"
         )
-        print("|---|---|---|---|---|---|---|---|---|---|---|")
-        for kind in with_rooms:
-            for pose_source in poses:
-                rows = [r for r in results if (r.kind, r.poses) == (kind, pose_source)]
-                print(rooms_row(kind, pose_source, rows))
+        print_table(columns, with_rooms, poses, results, rooms_row)
     if args.details:
         print()
         for r in results:

@@ -157,6 +157,18 @@ def _line_list(
     )
 
 
+def _label(x: float, y: float, text: str, size: float, color: Color) -> TextPrimitive:
+    """A label on the floor at (x, y), facing the viewer, the same size at any zoom."""
+    return TextPrimitive(
+        pose=foxglove_pose(x, y, 0.0),
+        billboard=True,
+        font_size=size,
+        scale_invariant=True,
+        color=color,
+        text=text,
+    )
+
+
 def wall_entity(wall: WallRecord, ns: int, frame: str = "map") -> SceneEntity:
     """One wall of a map reply or update: its segments, its id as a label and as metadata.
 
@@ -173,16 +185,7 @@ def wall_entity(wall: WallRecord, ns: int, frame: str = "map") -> SceneEntity:
         lines=[
             _line_list(wall.segments, TENTATIVE if wall.tentative else CONFIRMED, WALL_THICKNESS)
         ],
-        texts=[
-            TextPrimitive(
-                pose=foxglove_pose((x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0),
-                billboard=True,
-                font_size=14.0,
-                scale_invariant=True,
-                color=LABEL,
-                text=str(wall.id),
-            )
-        ],
+        texts=[_label((x0 + x1) / 2.0, (y0 + y1) / 2.0, str(wall.id), 14.0, LABEL)],
     )
 
 
@@ -244,13 +247,8 @@ def room_entity(room: dict[str, Any], ns: int, frame: str = "map") -> SceneEntit
             )
         ],
         texts=[
-            TextPrimitive(
-                pose=foxglove_pose(float(cx), float(cy), 0.0),
-                billboard=True,
-                font_size=16.0,
-                scale_invariant=True,
-                color=ROOM,
-                text=f"R{int(room['id'])} {float(room['area']):.1f} m²",
+            _label(
+                float(cx), float(cy), f"R{int(room['id'])} {float(room['area']):.1f} m²", 16.0, ROOM
             )
         ],
     )
