@@ -212,11 +212,14 @@ def _check_endpoint(settings: ZenohSettings) -> None:
     found = re.fullmatch(r"tcp/(.+):(\d+)", endpoint)
     if found is None:
         return
+    port = int(found[2])
+    if not 0 < port < 65536:
+        raise LaunchError(f"cannot start a router on {endpoint}: a port is 1-65535")
     with socket.socket() as probe:
         # As a router binds: a port left in TIME_WAIT by one just stopped is free to it.
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            probe.bind((found[1].strip("[]"), int(found[2])))
+            probe.bind((found[1].strip("[]"), port))
         except OSError as err:
             msg = (
                 f"cannot start a router on {endpoint} ({err.strerror}): `wallmap up` runs its "

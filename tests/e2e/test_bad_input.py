@@ -164,6 +164,11 @@ def test_up_on_an_endpoint_taken_is_one_line(stack):
     assert_one_line_error(out, "up", "cannot start a router", stack.endpoint)
 
 
+def test_up_on_a_port_out_of_range_is_one_line():
+    out = run_wallmap("up", "x.bag", "--connect", "tcp/127.0.0.1:99999", expect=1)
+    assert_one_line_error(out, "up", "cannot start a router", "a port is 1-65535")
+
+
 def test_no_router_is_one_line():
     port = free_port()
     out = run_wallmap("query", "--connect", f"tcp/127.0.0.1:{port}", expect=1)
