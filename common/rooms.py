@@ -29,6 +29,7 @@ and the benchmarks share it. Ids are not given here (``services.mapper.room_map`
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Sequence
@@ -105,11 +106,16 @@ class WallSegments:
 
 @dataclass(frozen=True)
 class Opening:
-    """A span from one wall's end to another wall (or piece of its own), in the map frame."""
+    """A span from one wall's end to another wall (or piece of its own), in the map frame.
+
+    ``divider``: a divider's span, door and missing wall in one (``_divider_spans``): its door
+    is the part seen crossed (``door_span``). Any other span is all door.
+    """
 
     wall: int
     p0: Array
     p1: Array
+    divider: bool = False
 
     @property
     def width(self) -> float:
@@ -312,6 +318,10 @@ def _crossing(p: Array, q: Array, a: Array, b: Array, own: NDArray[np.int64]) ->
         t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / denom
         u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / denom
     inner = (t > 0.02) & (t < 0.98) & (u > 0.02) & (u < 0.98)
+    # Parallel (a span along the line of a wall's other piece) is no crossing: there the
+    # fractions are noise over a vanishing denominator.
+    sizes = np.hypot(d[..., 0], d[..., 1]) * np.hypot(e[..., 0], e[..., 1])
+    inner &= np.abs(denom) > 1e-6 * sizes
     inner[np.arange(len(p)), own] = False
     return inner.any(axis=1)
 
@@ -453,7 +463,7 @@ def _divider_spans(
             continue  # a pillar's face, a cupboard's side: no divider
         p0, p1 = door_span(grid, span, config.door_min)
         if float(np.hypot(*(p1 - p0))) < span.width - config.door_min / 2:
-            found.append(span)
+            found.append(dataclasses.replace(span, divider=True))
             used |= _ends_of([span])
     return found
 
@@ -656,8 +666,7 @@ def _door(
     if min(sides) < 0 and not _free_near(grid, along + (radius + 2.5 * grid.cell) * sides_dir):
         return None  # towards no room, and nothing seen beyond it either: not an opening
     rooms = tuple(sorted(s for s in sides if s >= 0))
-    wide = span.width > config.door_max
-    p0, p1 = door_span(grid, span, config.door_min) if wide else (span.p0, span.p1)
+    p0, p1 = door_span(grid, span, config.door_min) if span.divider else (span.p0, span.p1)
     return DoorShape(p0, p1, span.wall, rooms)
 
 

@@ -29,6 +29,7 @@ _ROUTE_FURNITURE_CLEARANCE = 0.85
 _MIN_WALL_GAP = 0.3
 _MIN_KINK_DEG = 10.0
 _MAX_ATTEMPTS = 200
+DOORWAY = (1.5, 1.7)  # m: narrowest and widest doorway in a strip's dividers
 _PILLAR_SIZE = 0.3
 _DOOR_WIDTH = (0.9, 1.2)  # corridor doors: ordinary ones, narrower than the strip's doorways
 _MIN_PIECE = 1.0  # shortest corridor wall piece, as the shortest wall of a strip plan
@@ -394,6 +395,7 @@ def _try_plan(
     glass_fraction: float,
     furniture_per_room: int,
     pillars_per_room: int,
+    doorway: tuple[float, float] = DOORWAY,
 ) -> FloorPlan | None:
     """One attempt at a plan in strip coordinates (x along the strip); None if invalid."""
     lengths = rng.uniform(6.5, 8.5, n_rooms)
@@ -406,7 +408,7 @@ def _try_plan(
     tilts = np.radians(rng.uniform(-1.0, 1.0, n_rooms + 1) * tilt_limits)
     door_c = rng.uniform(-0.3, 0.3, n_rooms + 1)
     door_c[[0, -1]] = 0.0
-    door_w = rng.uniform(1.5, 1.7, n_rooms + 1)
+    door_w = rng.uniform(*doorway, n_rooms + 1)
 
     centers, along, left_anchor, right_anchor = [], [], [], []
     for b in range(n_rooms + 1):
@@ -793,16 +795,18 @@ def generate_floorplan(
     furniture_per_room: int = 2,
     layout: Layout = "rooms",
     pillars_per_room: int = 0,
+    doorway: tuple[float, float] = DOORWAY,
 ) -> FloorPlan:
     """A random non-Manhattan plan a robot can drive through.
 
     Layout ``rooms`` (the default) is a strip of rooms: the two long side walls are
     polylines with random kinks; the rooms are divided by walls leaning up to 35 degrees
-    from perpendicular, each with a 1.5-1.7 m doorway (wide enough to pass with 0.6 m
-    clearance to the jambs). Layout ``corridor`` is a corridor 1.8-2.5 m wide of straight
-    legs joined by kinks of 10-25 degrees. Its side walls have up to two 0.9-1.2 m doors
-    per leg (at least three in all, and some on each side); at least one door opens into a
-    small room (2-3 m deep, side walls leaning up to 20 degrees), the others into nothing.
+    from perpendicular, each with a doorway ``doorway`` wide (1.5-1.7 m: wide enough to pass
+    with 0.6 m clearance to the jambs; wider, an open-plan passage). Layout ``corridor`` is a
+    corridor 1.8-2.5 m wide of straight legs joined by kinks of 10-25 degrees. Its side walls
+    have up to two 0.9-1.2 m doors per leg (at least three in all, and some on each side); at
+    least one door opens into a small room (2-3 m deep, side walls leaning up to 20 degrees),
+    the others into nothing.
     The route runs down the corridor's middle. Either way the whole plan is rotated by a
     random angle and placed so that the route starts at the map origin, and every wall is
     1-8 m long except the faces of pillars. The same arguments always give the same plan.
@@ -817,6 +821,7 @@ def generate_floorplan(
         layout: ``rooms`` or ``corridor``.
         pillars_per_room: Free-standing square pillars (0.3 m, full height) per room,
             beside the route; each adds four walls. Only for the ``rooms`` layout.
+        doorway: The dividers' openings, narrowest and widest (m). Only for ``rooms``.
 
     Returns:
         The plan, with ``route`` set to waypoints through all rooms or down the corridor.
@@ -834,7 +839,9 @@ def generate_floorplan(
         if layout == "corridor":
             strip = _try_corridor(rng, n_rooms, glass_fraction, furniture_per_room)
         else:
-            strip = _try_plan(rng, n_rooms, glass_fraction, furniture_per_room, pillars_per_room)
+            strip = _try_plan(
+                rng, n_rooms, glass_fraction, furniture_per_room, pillars_per_room, doorway
+            )
         if strip is not None:
             angle = float(rng.uniform(-math.pi, math.pi))
             return _transform_plan(strip, angle, np.asarray(strip.route[0]))

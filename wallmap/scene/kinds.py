@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from wallmap.scene.floorplan import (
+    DOORWAY,
     FloorPlan,
     Layout,
     generate_floorplan,
@@ -30,6 +31,7 @@ class SceneKind:
         glass_fraction: Share of walls that are glass.
         furniture_per_room: Boxes per room, all below the detector's height band.
         pillars_per_room: Free-standing 0.3 m pillars per room (four short walls each).
+        doorway: The dividers' openings, narrowest and widest (m): wider than a door, passages.
         counters: Kitchen counters with appliances on them, along walls (``with_counters``).
         windows: Walls with a 2 m glass window across the band (``with_windows``).
         junction: The plan is ``junction_plan``'s (a T at the map origin), not a generated one.
@@ -42,6 +44,7 @@ class SceneKind:
     glass_fraction: float = 0.15
     furniture_per_room: int = 2
     pillars_per_room: int = 0
+    doorway: tuple[float, float] = DOORWAY
     counters: int = 0
     windows: int = 0
     junction: bool = False
@@ -57,6 +60,7 @@ class SceneKind:
             glass_fraction=self.glass_fraction,
             furniture_per_room=self.furniture_per_room,
             pillars_per_room=self.pillars_per_room,
+            doorway=self.doorway,
         )
         if self.windows:
             plan = with_windows(plan, seed, self.windows)
@@ -68,6 +72,11 @@ SCENE_KINDS: dict[str, SceneKind] = {
     for kind in (
         SceneKind("non-manhattan", "three rooms, kinked walls at any angle (the default plan)"),
         SceneKind("corridor", "long kinked corridor, narrow doors, small side rooms", "corridor"),
+        SceneKind(
+            "open-plan",
+            "three rooms joined by 2.6-2.9 m passages, too wide for doors",
+            doorway=(2.6, 2.9),
+        ),
         SceneKind("glass", "45 % of the walls are glass", glass_fraction=0.45),
         SceneKind(
             "clutter",
