@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.free_space import FreeSpace
-from wallmap.common.rooms import WallSegments, find_rooms
+from wallmap.common.rooms import WallSegments, _crossing, find_rooms
 from wallmap.room_evaluation import iou
 from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan, smooth_route
 
@@ -144,3 +144,19 @@ def test_a_span_seen_free_all_along_or_from_a_short_stub_divides_nothing() -> No
         route = np.concatenate([_through_the_door(y) for y in (1.5, 2.5, 3.5)])
         layout = find_rooms(_walls(list(plan.walls)), _seen(plan, route))
         assert [round(room.area) for room in layout.rooms] == [48], divider
+
+
+def test_a_span_in_line_with_a_wall_does_not_cross_it() -> None:
+    """A passage between two pieces of one mapped wall (an open-plan scene, seed 501): the span
+    and the far piece are in one line to rounding, and the test for crossing divided by almost
+    nothing. In line is not across."""
+    p = np.array([[-10.251154442329293, -10.497691235941629]])
+    q = np.array([[-12.203132448423844, -8.705836259530985]])
+    piece = np.array(
+        [[-13.364139459202125, -7.640068006294861], [-12.203132448423844, -8.705836259530985]]
+    )
+    own = np.array([[-9.0, -11.6], [-10.251154442329293, -10.497691235941629]])
+    across = np.array([[-11.0, -10.5], [-11.5, -8.5]])  # a wall across the span's middle
+    a, b = np.array([own[0], piece[0], across[0]]), np.array([own[1], piece[1], across[1]])
+    assert not _crossing(p, q, a[:2], b[:2], np.array([0]))[0]
+    assert _crossing(p, q, a, b, np.array([0]))[0]
