@@ -107,6 +107,7 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
     args = ("ros2", "--sensor", SENSORS["depth16"], *stack.zenoh_args)
     first = stack.start("ros2", *args)
     _wait_for(stack, "ros2")
+    first_run = _status_of(stack, "ros2")["run"]  # now: asked at the restart, it would delay it
     image = "/camera/depth/image_raw"
     with client(stack.endpoint) as session:
         robot = Robot(session, info.path, "")
@@ -115,7 +116,6 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
         while robot.sent.get(image, 0) < 70 and playing.is_alive():
             time.sleep(0.05)
         lost_from = robot.sent.get(image, 0)  # from here until the second is up
-        first_run = _status_of(stack, "ros2")["run"]
         assert first.stop(sig=2) == 0
         second = stack.start("ros2-again", *args)
         _wait_for(stack, "ros2", not_run=first_run)  # the first's presence may linger
