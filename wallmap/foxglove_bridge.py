@@ -176,16 +176,33 @@ def wall_entity(wall: WallRecord, ns: int, frame: str = "map") -> SceneEntity:
     """
     (x0, y0), (x1, y1) = wall.p0, wall.p1
     keys = ("id", "u", "v", "n_obs", "n_views", "tentative", "first_seen", "last_seen")
-    record = wall.to_map()
+    colour, record = TENTATIVE if wall.tentative else CONFIRMED, wall.to_map()
+    return _entity(
+        f"wall/{wall.id}",
+        ns,
+        frame,
+        {k: record[k] for k in keys},
+        [_line_list(wall.segments, colour, WALL_THICKNESS)],
+        [_label((x0 + x1) / 2.0, (y0 + y1) / 2.0, str(wall.id), 14.0, LABEL)],
+    )
+
+
+def _entity(
+    entity_id: str,
+    ns: int,
+    frame: str,
+    numbers: dict[str, Any],
+    lines: list[LinePrimitive],
+    texts: list[TextPrimitive] | None = None,
+) -> SceneEntity:
+    """One entity: its id, its lines and labels, and its numbers as metadata (shown on click)."""
     return SceneEntity(
         timestamp=timestamp(ns),
         frame_id=frame,
-        id=f"wall/{wall.id}",
-        metadata=[KeyValuePair(key=k, value=_text(record[k])) for k in keys],
-        lines=[
-            _line_list(wall.segments, TENTATIVE if wall.tentative else CONFIRMED, WALL_THICKNESS)
-        ],
-        texts=[_label((x0 + x1) / 2.0, (y0 + y1) / 2.0, str(wall.id), 14.0, LABEL)],
+        id=entity_id,
+        metadata=[KeyValuePair(key=k, value=_text(v)) for k, v in numbers.items()],
+        lines=lines,
+        texts=texts or [],
     )
 
 
@@ -233,37 +250,28 @@ def room_entity(room: dict[str, Any], ns: int, frame: str = "map") -> SceneEntit
     points = [Point3(x=float(x), y=float(y), z=ROOM_HEIGHT) for x, y in room["polygon"]]
     keys = ("id", "area", "closed", "walls", "doors")
     cx, cy = room["centroid"]
-    return SceneEntity(
-        timestamp=timestamp(ns),
-        frame_id=frame,
-        id=f"room/{int(room['id'])}",
-        metadata=[KeyValuePair(key=k, value=_text(room[k])) for k in keys],
-        lines=[
-            LinePrimitive(
-                type=LinePrimitiveLineType.LineLoop,
-                points=points,
-                color=ROOM if room["closed"] else OPEN_ROOM,
-                thickness=WALL_THICKNESS,
-            )
-        ],
-        texts=[
-            _label(
-                float(cx), float(cy), f"R{int(room['id'])} {float(room['area']):.1f} m²", 16.0, ROOM
-            )
-        ],
+    outline = LinePrimitive(
+        type=LinePrimitiveLineType.LineLoop,
+        points=points,
+        color=ROOM if room["closed"] else OPEN_ROOM,
+        thickness=WALL_THICKNESS,
+    )
+    label = f"R{int(room['id'])} {float(room['area']):.1f} m²"
+    return _entity(
+        f"room/{int(room['id'])}",
+        ns,
+        frame,
+        {k: room[k] for k in keys},
+        [outline],
+        [_label(float(cx), float(cy), label, 16.0, ROOM)],
     )
 
 
 def door_entity(door: dict[str, Any], ns: int, frame: str = "map") -> SceneEntity:
     """A door: its span from jamb to jamb, and its numbers (width, wall, the rooms it joins)."""
     keys = ("id", "width", "wall", "rooms")
-    return SceneEntity(
-        timestamp=timestamp(ns),
-        frame_id=frame,
-        id=f"door/{int(door['id'])}",
-        metadata=[KeyValuePair(key=k, value=_text(door[k])) for k in keys],
-        lines=[_line_list([(door["p0"], door["p1"])], DOOR, DOOR_THICKNESS, ROOM_HEIGHT)],
-    )
+    span = _line_list([(door["p0"], door["p1"])], DOOR, DOOR_THICKNESS, ROOM_HEIGHT)
+    return _entity(f"door/{int(door['id'])}", ns, frame, {k: door[k] for k in keys}, [span])
 
 
 def rooms_scene(body: dict[str, Any], ns: int, frame: str = "map") -> SceneUpdate:
