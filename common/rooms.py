@@ -382,9 +382,16 @@ class _Grid:
 
 
 def find_rooms(
-    walls: Sequence[WallSegments], free: FreeSpace, config: RoomsConfig | None = None
+    walls: Sequence[WallSegments],
+    free: FreeSpace,
+    config: RoomsConfig | None = None,
+    outlines: Outlines | None = None,
 ) -> Layout:
-    """Rooms and doors of the map's walls and the seen floor (steps 1-3 of the module's doc)."""
+    """Rooms and doors of the map's walls and the seen floor (steps 1-3 of the module's doc).
+
+    ``outlines``: the last segmentation's rooms by their cells, to reuse the outline of a room
+    whose cells did not change (most, between two updates of a large map); updated in place.
+    """
     config = config or RoomsConfig()
     grid = _Grid(free, walls)
     if not grid.free.any():
@@ -410,10 +417,7 @@ def find_rooms(
         if not closed:
             _fill_open(grid, labels, barrier, k, config.fill_reach)
     _grow(labels, barrier, math.ceil(radius / grid.cell))
-    shapes = [
-        _shape(grid, cells, closed, config)
-        for cells, closed in zip(_cells_of(labels, len(rooms)), rooms, strict=True)
-    ]
+    shapes = _shapes(grid, _cells_of(labels, len(rooms)), rooms, config, outlines)
     _bounding_walls(grid, labels, walls, shapes, radius)
     doors = [
         door
@@ -587,6 +591,30 @@ def _cells_of(labels: NDArray[np.int32], n: int) -> list[NDArray[np.int64]]:
     bounds = np.searchsorted(room[order], np.arange(n + 1))
     cells = np.stack([ii, jj], axis=1)[order]
     return [cells[bounds[k] : bounds[k + 1]] for k in range(n)]
+
+
+Outlines = dict[tuple[bool, bytes], RoomShape]  # (closed, global cells' bytes) -> shape
+
+
+def _shapes(
+    grid: _Grid,
+    cells: list[NDArray[np.int64]],
+    closed: list[bool],
+    config: RoomsConfig,
+    outlines: Outlines | None,
+) -> list[RoomShape]:
+    """Each room's shape, the last segmentation's where its cells are the same (``outlines``)."""
+    known = {} if outlines is None else outlines
+    shapes, kept = [], {}
+    for mine, shut in zip(cells, closed, strict=True):
+        key = (shut, (mine + grid.origin).tobytes())
+        shape = known.get(key) or _shape(grid, mine, shut, config)
+        kept[key] = shape
+        shapes.append(dataclasses.replace(shape, walls=[]))
+    if outlines is not None:
+        outlines.clear()
+        outlines.update(kept)
+    return shapes
 
 
 def _shape(grid: _Grid, cells: NDArray[np.int64], closed: bool, config: RoomsConfig) -> RoomShape:

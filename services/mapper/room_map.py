@@ -24,7 +24,15 @@ from numpy.typing import NDArray
 
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.map_records import WallRecord
-from wallmap.common.rooms import DoorShape, Layout, RoomsConfig, RoomShape, WallSegments, find_rooms
+from wallmap.common.rooms import (
+    DoorShape,
+    Layout,
+    Outlines,
+    RoomsConfig,
+    RoomShape,
+    WallSegments,
+    find_rooms,
+)
 
 Array = NDArray[np.float64]
 
@@ -166,6 +174,7 @@ class RoomMap:
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     _last: Array | None = field(default=None, repr=False)  # the pose of the last frame kept
+    _outlines: Outlines = field(default_factory=dict, repr=False)  # the last update's rooms
 
     def add_frame(self, pose: Array, origin: Array | None, rays: Array | None) -> None:
         """A frame's pose (x, y, yaw) and its free rays (robot frame); drawn at the next update.
@@ -201,7 +210,7 @@ class RoomMap:
             for w in walls
             if not w.tentative
         ]
-        layout = find_rooms(segments, self.free, self.config)
+        layout = find_rooms(segments, self.free, self.config, self._outlines)
         self.reply = self._records(layout, stamp)
         self.seconds = time.perf_counter() - started
         return self.reply

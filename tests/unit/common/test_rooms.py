@@ -160,3 +160,23 @@ def test_a_span_in_line_with_a_wall_does_not_cross_it() -> None:
     a, b = np.array([own[0], piece[0], across[0]]), np.array([own[1], piece[1], across[1]])
     assert not _crossing(p, q, a[:2], b[:2], np.array([0]))[0]
     assert _crossing(p, q, a, b, np.array([0]))[0]
+
+
+def test_an_outline_is_reused_only_for_a_room_whose_cells_did_not_change() -> None:
+    plan = generate_floorplan(1, glass_fraction=0.0)
+    route = smooth_route(plan.route)[::3]
+    free = _seen(plan, route[: len(route) // 2])  # the robot halfway: the last room unseen
+    outlines: dict = {}
+    first = find_rooms(_walls(list(plan.walls)), free, outlines=outlines)
+    assert len(outlines) == len(first.rooms)
+    again = find_rooms(_walls(list(plan.walls)), free, outlines=outlines)
+    assert [r.polygon.tolist() for r in again.rooms] == [r.polygon.tolist() for r in first.rooms]
+    before = set(outlines)
+    for at in route[len(route) // 2 :]:  # the rest of the drive: a room more, the last grows
+        free.add_rays(np.array([*at, 0.0]), np.zeros(2), free_rays(plan, at))
+    later = find_rooms(_walls(list(plan.walls)), free, outlines=outlines)
+    fresh = find_rooms(_walls(list(plan.walls)), free)
+    assert [r.polygon.tolist() for r in later.rooms] == [r.polygon.tolist() for r in fresh.rooms]
+    assert [r.walls for r in later.rooms] == [r.walls for r in fresh.rooms]
+    assert set(outlines) != before, "the grown room's outline is new"
+    assert len(outlines) == len(later.rooms), "only this segmentation's rooms are kept"
