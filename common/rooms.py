@@ -53,6 +53,8 @@ from wallmap.common.grid_labels import (
 Array = NDArray[np.float64]
 PAD = 8  # cells of grid kept around everything known
 TRIM_GAP = 0.3  # m unseen along a passage bridged when its door is found (``door_span``)
+GAP_REACH = 2.5  # m past a wall's end along its line where an end across it is in its gap
+GAP_ANGLE = 45.0  # deg: an end's wall this far from another's line runs across it
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,10 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
         gap = np.hypot(*(feet - point[:, None]).transpose(2, 0, 1))
         gap[np.arange(len(point)), piece] = np.inf
         keep = (norm > 1e-9) & (gap.min(axis=1) >= joint)
+    open_at = keep.reshape(2, -1)  # (a end, b end) of each segment: not joined to a wall
+    keep[keep] = ~_in_a_gap(
+        point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at.copy()
+    )
     return _Ends(
         wall=owners.astype(np.int64)[piece[keep]],
         piece=piece[keep],
@@ -222,6 +228,39 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
         b=b,
         feet=feet[keep],
     )
+
+
+def _in_a_gap(
+    point: Array,
+    outward: Array,
+    piece: NDArray[np.int64],
+    a: Array,
+    b: Array,
+    joint: float,
+    open_at: NDArray[np.bool_],
+) -> NDArray[np.bool_]:
+    """Ends that stop in the line of another wall, in a gap of it: a door beside a corner.
+
+    A side room's wall meets a corridor's wall where the corridor's wall has the side room's
+    door: its end is free, and the way it points crosses the corridor, where a span would cut
+    the corridor in two. The door is the gap in the corridor's wall, which that wall's own end
+    spans; this end opens nothing. Within twice ``joint`` of the line (a mapped end stops a
+    little short), at most ``GAP_REACH`` past the wall's end, that end open (``open_at``: a
+    gap's jamb, not a corner), and across it (an end in line with a wall is a door in one line
+    of wall, and opens it).
+    """
+    seg = b - a
+    length = np.maximum(np.hypot(seg[:, 0], seg[:, 1]), 1e-12)
+    unit = seg / length[:, None]
+    rel = point[:, None] - a[None]  # (e, s, 2)
+    along = np.einsum("esk,sk->es", rel, unit)
+    off_line = np.abs(rel[..., 0] * unit[None, :, 1] - rel[..., 1] * unit[None, :, 0])
+    beyond = np.maximum(-along, along - length[None])  # past the wall's nearer end (m)
+    across = np.abs(outward @ unit.T) < math.cos(math.radians(GAP_ANGLE))
+    jamb = np.where(along < 0, open_at[0][None], open_at[1][None])  # that end of the wall open
+    in_gap = (off_line < 2 * joint) & (beyond > 0) & (beyond <= GAP_REACH) & across & jamb
+    in_gap[np.arange(len(point)), piece] = False
+    return in_gap.any(axis=1)
 
 
 def openings(

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.free_space import FreeSpace
+from wallmap.common.grid_labels import inside_polygon
 from wallmap.common.rooms import WallSegments, _crossing, find_rooms
 from wallmap.room_evaluation import iou
 from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan, smooth_route
@@ -180,3 +181,27 @@ def test_an_outline_is_reused_only_for_a_room_whose_cells_did_not_change() -> No
     assert [r.walls for r in later.rooms] == [r.walls for r in fresh.rooms]
     assert set(outlines) != before, "the grown room's outline is new"
     assert len(outlines) == len(later.rooms), "only this segmentation's rooms are kept"
+
+
+def test_a_side_rooms_wall_at_its_door_does_not_cut_the_corridor() -> None:
+    """A corridor 2 m wide; a side room's door in its right wall, the room's wall meeting the
+    corridor's line 1.3 m past the door's jamb (the corridor's wall there unmapped: glass).
+    That wall's end points across the corridor, 2 m: a door's width, but no door."""
+    mapped = [
+        Wall(0, (0.0, 2.0), (10.0, 2.0)),  # the corridor's left wall
+        Wall(1, (0.0, 0.0), (4.0, 0.0)),  # its right wall, to the door's jamb
+        Wall(2, (6.5, 0.0), (10.0, 0.0)),  # ...and on past the side room
+        Wall(3, (5.3, 0.0), (5.3, -3.0)),  # the side room's walls
+        Wall(4, (5.3, -3.0), (6.5, -3.0)),
+        Wall(5, (6.5, -3.0), (6.5, 0.0)),
+        Wall(6, (0.0, 0.0), (0.0, 2.0)),  # the corridor's ends
+        Wall(7, (10.0, 0.0), (10.0, 2.0)),
+    ]
+    glass = Wall(8, (5.3, 0.0), (6.5, 0.0), glass=True)
+    plan = FloorPlan(walls=(*mapped, glass))
+    route = np.array([[0.55 + 0.1 * k, 1.05] for k in range(89)])
+    layout = find_rooms(_walls(mapped), _seen(plan, route))
+    ends = np.array([[1.0, 1.0], [9.0, 1.0]])
+    corridor = [r for r in layout.rooms if inside_polygon(ends, r.polygon).any()]
+    assert len(corridor) == 1, "one corridor, not cut at the side room's wall"
+    assert inside_polygon(ends, corridor[0].polygon).all()
