@@ -56,11 +56,20 @@ def label(mask: Mask) -> tuple[NDArray[np.int32], int]:
                     parent[rb] = ra
     roots = np.array([_find(parent, i) for i in range(len(rows))])
     _, run_label = np.unique(roots, return_inverse=True)
-    lengths = ends - starts
-    cell_rows = np.repeat(rows, lengths)
-    cell_cols = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
-    labels[cell_rows, cell_cols] = np.repeat(run_label, lengths)
+    run, at = spread(ends - starts)
+    labels[rows[run], starts[run] + at] = run_label[run]
     return labels, int(run_label.max()) + 1
+
+
+def spread(counts: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Items counted per group, listed end to end: each one's group and its place in the group.
+
+    ``counts`` [2, 0, 3] gives groups [0, 0, 2, 2, 2] and places [0, 1, 0, 1, 2]: a loop over
+    groups and their items done as whole arrays.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    group = np.repeat(np.arange(len(counts)), counts)
+    return group, np.arange(len(group)) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def touches_border(labels: NDArray[np.int32], n: int) -> NDArray[np.bool_]:

@@ -47,6 +47,7 @@ from wallmap.common.grid_labels import (
     polygon_area,
     polygon_centroid,
     simplify,
+    spread,
     touches_border,
 )
 
@@ -110,14 +111,14 @@ class WallSegments:
 class Opening:
     """A span from one wall's end to another wall (or piece of its own), in the map frame.
 
-    ``divider``: a divider's span, door and missing wall in one (``_divider_spans``): its door
-    is the part seen crossed (``door_span``). Any other span is all door.
+    ``door``: a divider's span is door and missing wall in one (``_divider_spans``); its door
+    is the part seen crossed (``door_span``). Any other span (None) is all door.
     """
 
     wall: int
     p0: Array
     p1: Array
-    divider: bool = False
+    door: tuple[Array, Array] | None = None
 
     @property
     def width(self) -> float:
@@ -217,7 +218,7 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
         keep = (norm > 1e-9) & (gap.min(axis=1) >= joint)
     open_at = keep.reshape(2, -1)  # (a end, b end) of each segment: not joined to a wall
     keep[keep] = ~_in_a_gap(
-        point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at.copy()
+        point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at
     )
     return _Ends(
         wall=owners.astype(np.int64)[piece[keep]],
@@ -408,8 +409,7 @@ class _Grid:
         lo, hi = np.maximum(lo, 0), np.minimum(hi, np.array(self.shape) - 1)
         size = np.maximum(hi - lo + 1, 0)  # (k, 2): cells along i and j
         count = size[:, 0] * size[:, 1]
-        seg = np.repeat(np.arange(len(p)), count)
-        rank = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+        seg, rank = spread(count)
         ii = lo[seg, 0] + rank // np.maximum(size[seg, 1], 1)
         jj = lo[seg, 1] + rank % np.maximum(size[seg, 1], 1)
         c = self.centres(ii, jj)
@@ -446,7 +446,7 @@ def find_rooms(
     barrier = base.copy()
     _draw_spans(grid, barrier, dividers, radius)
     labels, rooms = _regions(grid, barrier, config)
-    kept = [d for d in dividers if _divides(grid, labels, d, radius, config.door_min)]
+    kept = [d for d in dividers if _divides(grid, labels, d, radius)]
     if len(kept) < len(dividers):  # one that divides no two rooms is no divider: without it
         barrier = base
         _draw_spans(grid, barrier, kept, radius)
@@ -461,8 +461,7 @@ def find_rooms(
     doors = [
         door
         for span in spans
-        if span.width >= config.door_min
-        and (door := _door(grid, labels, span, radius, config)) is not None
+        if span.width >= config.door_min and (door := _door(grid, labels, span, radius)) is not None
     ]
     return Layout(shapes, doors)
 
@@ -474,12 +473,9 @@ def _draw_spans(
     grid.draw(barrier, np.array([o.p0 for o in spans]), np.array([o.p1 for o in spans]), radius)
 
 
-def _divides(
-    grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float, door_min: float
-) -> bool:
+def _divides(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> bool:
     """Whether the door part of a divider's span has two different rooms on its two sides."""
-    p0, p1 = door_span(grid, span, door_min)
-    sides = _sides(grid, labels, Opening(span.wall, p0, p1), radius)
+    sides = _sides(grid, labels, Opening(span.wall, *(span.door or (span.p0, span.p1))), radius)
     return min(sides) >= 0 and sides[0] != sides[1]
 
 
@@ -504,9 +500,9 @@ def _divider_spans(
         k = int(np.argmin(np.hypot(*(ends.point - span.p0).T)))  # the end it starts from
         if length[ends.piece[k]] < config.divider_min:
             continue  # a pillar's face, a cupboard's side: no divider
-        p0, p1 = door_span(grid, span, config.door_min)
-        if float(np.hypot(*(p1 - p0))) < span.width - config.door_min / 2:
-            found.append(dataclasses.replace(span, divider=True))
+        door = door_span(grid, span, config.door_min)
+        if float(np.hypot(*(door[1] - door[0]))) < span.width - config.door_min / 2:
+            found.append(dataclasses.replace(span, door=door))
             used |= _ends_of([span])
     return found
 
@@ -698,8 +694,7 @@ def _bounding_walls(
     real = length >= 1e-9
     a, b, length, owner = a[real], b[real], length[real], owner[real]
     n = np.maximum(2, (length / 0.2).astype(np.int64))
-    seg = np.repeat(np.arange(len(a)), n)
-    rank = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    seg, rank = spread(n)
     t = 0.1 + 0.8 * rank / (n[seg] - 1)
     along = a[seg] + t[:, None] * (b - a)[seg]
     normal = np.stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0]], axis=1) / length[:, None]
@@ -717,9 +712,7 @@ def _bounding_walls(
         shapes[room].walls.append(walls[k].id)
 
 
-def _door(
-    grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float, config: RoomsConfig
-) -> DoorShape | None:
+def _door(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> DoorShape | None:
     """The span as a door (step 3): seen through, and other rooms (or none) on its two sides."""
     t = np.linspace(0.2, 0.8, 5)[:, None]
     along = span.p0 + t * (span.p1 - span.p0)
@@ -733,7 +726,7 @@ def _door(
     if min(sides) < 0 and not _free_near(grid, along + (radius + 2.5 * grid.cell) * sides_dir):
         return None  # towards no room, and nothing seen beyond it either: not an opening
     rooms = tuple(sorted(s for s in sides if s >= 0))
-    p0, p1 = door_span(grid, span, config.door_min) if span.divider else (span.p0, span.p1)
+    p0, p1 = span.door or (span.p0, span.p1)
     return DoorShape(p0, p1, span.wall, rooms)
 
 

@@ -15,6 +15,7 @@ from wallmap.common.grid_labels import (
     polygon_area,
     polygon_centroid,
     simplify,
+    spread,
     touches_border,
 )
 
@@ -98,3 +99,11 @@ def test_the_convex_hull_holds_every_point_and_only_corners() -> None:
     assert inside_polygon(points * 0.999 + 0.005, hull).mean() > 0.97
     square = np.array([[0, 0], [4, 0], [4, 4], [0, 4], [2, 2], [2, 0]], dtype=float)
     assert sorted(map(tuple, convex_hull(square))) == [(0, 0), (0, 4), (4, 0), (4, 4)]
+
+
+def test_spread_lists_each_groups_items_with_their_places() -> None:
+    counts = np.array([2, 0, 3, 1])
+    group, place = spread(counts)
+    expected = [(g, k) for g, n in enumerate(counts) for k in range(n)]
+    assert list(zip(group.tolist(), place.tolist(), strict=True)) == expected
+    assert [len(x) for x in spread(np.zeros(0, dtype=np.int64))] == [0, 0]
