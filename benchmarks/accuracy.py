@@ -25,8 +25,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from wallmap.config import configured
 from wallmap.evaluation import MapScore, evaluate_map
 from wallmap.offline import rooms, run_bag, walls
@@ -121,7 +119,7 @@ def run_scene(
             seconds = time.perf_counter() - start
             score = evaluate_map(walls(pipeline.map), info.plan, info.seen_counts)
             details = _describe(score, info.plan, info.seen_counts)
-            path = np.column_stack([info.trajectory.x, info.trajectory.y])
+            path = info.trajectory.positions
             room_score = (
                 evaluate_rooms(rooms(pipeline).to_map(), info.plan, path)
                 if info.plan.rooms

@@ -46,8 +46,7 @@ def score(seed: int, frames: int, folder: Path, layout: str) -> dict[str, float]
         plan=generate_floorplan(seed, layout=layout),
     )
     plan, trajectory, _ = load_truth(Path(f"{bag}.truth.json"))
-    path = np.column_stack([trajectory.x, trajectory.y])
-    found = evaluate_rooms(rooms(run_bag(bag)).to_map(), plan, path)
+    found = evaluate_rooms(rooms(run_bag(bag)).to_map(), plan, trajectory.positions)
     ious = found.entered_ious
     return {
         "rooms": found.rooms,

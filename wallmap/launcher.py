@@ -295,8 +295,8 @@ def _report(
         plan, trajectory, seen = truth
         print(f"against the ground truth: {evaluate_map(reply.walls, plan, seen).summary()}")
         if plan.rooms and rooms is not None:
-            path = list(zip(trajectory.x, trajectory.y, strict=True))
-            print(f"rooms against the ground truth: {evaluate_rooms(rooms, plan, path).summary()}")
+            score = evaluate_rooms(rooms, plan, trajectory.positions)
+            print(f"rooms against the ground truth: {score.summary()}")
     if options.json_out:
         document = to_json(reply, config=to_plain(config), partial=partial, rooms=rooms)
         options.json_out.write_text(document, "utf-8")

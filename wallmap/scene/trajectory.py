@@ -27,6 +27,11 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.stamps)
 
+    @property
+    def positions(self) -> np.ndarray:
+        """Where base_link was, (n, 2): the path the robot drove."""
+        return np.column_stack([self.x, self.y])
+
     def pose_at(self, i: int) -> tuple[float, float, float]:
         """Pose (x, y, yaw) of sample ``i``."""
         return float(self.x[i]), float(self.y[i]), float(self.yaw[i])

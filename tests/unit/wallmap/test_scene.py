@@ -179,7 +179,7 @@ def test_scene_kinds_give_valid_deterministic_plans(name, seed):
         assert point_segment_distance(np.zeros((1, 2)), np.array([outer.p0]),
                                       np.array([outer.p1]))[0, 0] < 1e-9  # fmt: skip
         assert min(math.dist(stem.p0, (0, 0)), math.dist(stem.p1, (0, 0))) < 1e-9
-        assert clearance(plan, np.column_stack([traj.x, traj.y])).min() >= 0.6
+        assert clearance(plan, traj.positions).min() >= 0.6
         return
     pillar_face = pytest.approx(0.3)
     assert all(1.0 <= w.length <= 8.0 or w.length == pillar_face for w in plan.walls)
@@ -190,7 +190,7 @@ def test_scene_kinds_give_valid_deterministic_plans(name, seed):
     assert all(box.base == 0.9 and box.height <= 1.35 for box in on_counters)
     assert bool(on_counters) == (kind.counters > 0)
     assert plan.route[0] == (0.0, 0.0)
-    assert clearance(plan, np.column_stack([traj.x, traj.y])).min() >= 0.6
+    assert clearance(plan, traj.positions).min() >= 0.6
 
 
 @pytest.mark.parametrize("name", ["non-manhattan", "tilted", "noisy"])
@@ -282,7 +282,7 @@ def test_camera_kinds_are_in_the_truth_file(tmp_path, name, key, value):
 def test_trajectory_drives_through_all_rooms_with_clearance(seed):
     plan = generate_floorplan(seed)
     traj = generate_trajectory(plan, seed, rate_hz=15.0)
-    xy = np.column_stack([traj.x, traj.y])
+    xy = traj.positions
 
     assert len(traj) >= 600  # 40 s of driving at 15 Hz
     assert clearance(plan, xy).min() >= 0.6
