@@ -25,40 +25,55 @@ def _runs(mask: Mask) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.
     return rows, starts, ends
 
 
-def _find(parent: list[int], i: int) -> int:
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
 def label(mask: Mask) -> tuple[NDArray[np.int32], int]:
     """4-connected components of ``mask``: labels 0..n-1 (-1 outside ``mask``), and n."""
-    labels = np.full(mask.shape, -1, dtype=np.int32)
     rows, starts, ends = _runs(mask)
     if not len(rows):
-        return labels, 0
-    parent = list(range(len(rows)))
-    first = np.searchsorted(rows, np.arange(mask.shape[0] + 1))  # runs of row r: first[r]..
-    for r in range(mask.shape[0] - 1):
-        a0, a1, b0, b1 = first[r], first[r + 1], first[r + 1], first[r + 2]
-        if a0 == a1 or b0 == b1:
-            continue
-        a_starts, a_ends = starts[a0:a1], ends[a0:a1]
-        # Runs of the next row overlapping run a: they start before a ends and end after a starts.
-        lo = np.searchsorted(ends[b0:b1], a_starts, side="right")
-        hi = np.searchsorted(starts[b0:b1], a_ends, side="left")
-        for k in np.nonzero(hi > lo)[0].tolist():
-            ra = _find(parent, a0 + k)
-            for b in range(b0 + int(lo[k]), b0 + int(hi[k])):
-                rb = _find(parent, b)
-                if ra != rb:
-                    parent[rb] = ra
-    roots = np.array([_find(parent, i) for i in range(len(rows))])
-    _, run_label = np.unique(roots, return_inverse=True)
-    run, at = spread(ends - starts)
-    labels[rows[run], starts[run] + at] = run_label[run]
+        return np.full(mask.shape, -1, dtype=np.int32), 0
+    root = _components(len(rows), *_touching_runs(rows, starts, ends, mask.shape[1]))
+    _, run_label = np.unique(root, return_inverse=True)
+    # Each run written as a step up at its start and down at its end, summed along its row.
+    steps = np.zeros((mask.shape[0], mask.shape[1] + 1), dtype=np.int32)
+    steps[rows, starts] = run_label + 1
+    steps[rows, ends] = -(run_label + 1)
+    labels = np.cumsum(steps[:, :-1], axis=1, dtype=np.int32) - 1
     return labels, int(run_label.max()) + 1
+
+
+def _touching_runs(
+    rows: NDArray[np.int64], starts: NDArray[np.int64], ends: NDArray[np.int64], width: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs of runs in neighbouring rows that overlap (share a column): 4-connected.
+
+    The runs of the next row that overlap run a start before a ends and end after a starts:
+    a contiguous stretch of the row-major list, found for every run at once by searching keys
+    row * (width + 1) + column.
+    """
+    stride = width + 1
+    lo = np.searchsorted(rows * stride + ends, (rows + 1) * stride + starts, side="right")
+    hi = np.searchsorted(rows * stride + starts, (rows + 1) * stride + ends, side="left")
+    a, k = spread(np.maximum(hi - lo, 0))
+    return a, lo[a] + k
+
+
+def _components(n: int, a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Each of ``n`` nodes' component (its smallest member) of the graph with edges a-b.
+
+    Union by hooking roots to the smaller root, then pointer jumping until every node points
+    at its root; repeated until no edge joins two roots: whole arrays per round, a few rounds.
+    """
+    parent = np.arange(n)
+    while True:
+        pa, pb = parent[a], parent[b]
+        apart = pa != pb
+        if not apart.any():
+            return parent
+        np.minimum.at(parent, np.maximum(pa, pb)[apart], np.minimum(pa, pb)[apart])
+        while True:
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped
 
 
 def spread(counts: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -169,37 +169,76 @@ class _Ends:
     outward: Array  # (e, 2) unit: the way its segment would go on
     a: Array  # (s, 2) every segment's first end
     b: Array  # (s, 2) ...and second
-    feet: Array  # (e, s, 2) each end's nearest point on each segment
+    reach: float  # farthest (m) any search looks from an end (``targets``)
 
     @functools.cached_property
-    def targets(self) -> tuple[Array, Array, Array]:
+    def targets(self) -> _Targets:
         """What each end may open onto, once for every search (``_nearest_ahead``).
 
-        Per end, every segment's two ends and its foot on it (e, 3s, 2); their distances, and
-        the cosines of their directions with the end's outward one (e, 3s), inf and -inf for
-        its own segment's.
+        Every other segment within ``reach``: its two ends and the end's foot on it.
         """
-        ends = [np.broadcast_to(end, self.feet.shape) for end in (self.a, self.b)]
-        points = np.concatenate([*ends, self.feet], axis=1)
-        own = np.tile(np.arange(len(self.a)), 3)[None] == self.piece[:, None]
-        rel = points - self.point[:, None]
-        dist = np.hypot(rel[..., 0], rel[..., 1])
+        k, s = _near(self.point, self.a, self.b, self.reach)  # by end, then segment
+        other = s != self.piece[k]
+        k, s = k[other], s[other]
+        # An end's rows together: its segments' first ends, their second ends, its feet.
+        count = np.bincount(k, minlength=len(self.point))
+        row = 2 * (np.cumsum(count) - count)[k] + np.arange(len(k))
+        points = np.empty((3 * len(k), 2))
+        points[row] = self.a[s]
+        points[row + count[k]] = self.b[s]
+        points[row + 2 * count[k]] = _foot(self.point[k], self.a[s], self.b[s])
+        end = np.repeat(np.arange(len(self.point)), 3 * count)
+        dx, dy = (points - self.point[end]).T
+        dist = np.hypot(dx, dy)
+        ox, oy = self.outward[end].T
         with np.errstate(divide="ignore", invalid="ignore"):
-            cosine = np.einsum("nmk,nk->nm", rel, self.outward) / dist
-        dist[own | (dist <= 1e-6)] = np.inf
-        cosine[own] = -np.inf
-        return points, dist, cosine
+            cosine = (dx * ox + dy * oy) / dist
+        dist[dist <= 1e-6] = np.inf
+        return _Targets(end, points, dist, cosine)
 
 
-def _feet(points: Array, a: Array, b: Array) -> Array:
-    """Each point's nearest point on each segment: (n, s, 2)."""
-    seg = b - a
-    length2 = np.maximum((seg**2).sum(axis=1), 1e-12)
-    t = np.clip(np.einsum("nsk,sk->ns", points[:, None, :] - a[None], seg) / length2, 0.0, 1.0)
-    return a[None] + t[..., None] * seg[None]
+@dataclass(frozen=True)
+class _Targets:
+    """Points an end may open onto, one row each (``_Ends.targets``).
+
+    Rows are grouped by end; within an end, in the order of all segments' first ends, then
+    second ends, then feet, which settles ties in distance whatever was left out as too far.
+    """
+
+    end: NDArray[np.int64]
+    points: Array
+    dist: Array
+    cosine: Array
+
+    @functools.cached_property
+    def groups(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Each end's first row, and each row's group (an index into the first)."""
+        new = np.diff(self.end, prepend=-1) != 0
+        return np.flatnonzero(new), np.cumsum(new) - 1
 
 
-def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
+def _near(
+    points: Array, a: Array, b: Array, radius: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (point k, segment s) with the point within ``radius`` of the segment's box.
+
+    Every pair within ``radius`` of each other is among them, and in a large map few more:
+    the exact tests run on these alone, not on every end against every segment.
+    """
+    lo, hi = np.minimum(a, b) - radius, np.maximum(a, b) + radius
+    x, y = points[:, :1], points[:, 1:]
+    k, s = np.nonzero((x >= lo[:, 0]) & (x <= hi[:, 0]) & (y >= lo[:, 1]) & (y <= hi[:, 1]))
+    return k.astype(np.int64), s.astype(np.int64)
+
+
+def _foot(points: Array, a: Array, b: Array) -> Array:
+    """Each point's nearest point on its segment a[k]-b[k]: (n, 2)."""
+    (sx, sy), (rx, ry) = (b - a).T, (points - a).T
+    t = np.clip((rx * sx + ry * sy) / np.maximum(sx * sx + sy * sy, 1e-12), 0.0, 1.0)
+    return a + t[:, None] * (b - a)
+
+
+def _free_ends(walls: Sequence[WallSegments], joint: float, reach: float) -> _Ends:
     """The ends of every segment not within ``joint`` of another segment (a corner, a T)."""
     segments = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
     owners = np.concatenate([[w.id] * len(s) for w, s in zip(walls, segments, strict=True)] + [[]])
@@ -209,13 +248,15 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
     outward = np.concatenate([a - b, b - a])
     piece = np.tile(np.arange(len(a)), 2)
     norm = np.hypot(outward[:, 0], outward[:, 1])
-    feet = _feet(point, a, b)
     if len(a) < 2:
         keep = np.zeros(len(point), dtype=bool)
     else:
-        gap = np.hypot(*(feet - point[:, None]).transpose(2, 0, 1))
-        gap[np.arange(len(point)), piece] = np.inf
-        keep = (norm > 1e-9) & (gap.min(axis=1) >= joint)
+        k, s = _near(point, a, b, joint)
+        k, s = k[s != piece[k]], s[s != piece[k]]
+        gap = np.hypot(*(_foot(point[k], a[s], b[s]) - point[k]).T)
+        joined = np.zeros(len(point), dtype=bool)
+        joined[k[gap < joint]] = True
+        keep = (norm > 1e-9) & ~joined
     open_at = keep.reshape(2, -1)  # (a end, b end) of each segment: not joined to a wall
     keep[keep] = ~_in_a_gap(
         point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at
@@ -227,7 +268,7 @@ def _free_ends(walls: Sequence[WallSegments], joint: float) -> _Ends:
         outward=outward[keep] / norm[keep, None],
         a=a,
         b=b,
-        feet=feet[keep],
+        reach=reach,
     )
 
 
@@ -250,18 +291,21 @@ def _in_a_gap(
     gap's jamb, not a corner), and across it (an end in line with a wall is a door in one line
     of wall, and opens it).
     """
-    seg = b - a
+    k, s = _near(point, a, b, GAP_REACH + 2 * joint)
+    k, s = k[s != piece[k]], s[s != piece[k]]
+    seg = (b - a)[s]
     length = np.maximum(np.hypot(seg[:, 0], seg[:, 1]), 1e-12)
     unit = seg / length[:, None]
-    rel = point[:, None] - a[None]  # (e, s, 2)
-    along = np.einsum("esk,sk->es", rel, unit)
-    off_line = np.abs(rel[..., 0] * unit[None, :, 1] - rel[..., 1] * unit[None, :, 0])
-    beyond = np.maximum(-along, along - length[None])  # past the wall's nearer end (m)
-    across = np.abs(outward @ unit.T) < math.cos(math.radians(GAP_ANGLE))
-    jamb = np.where(along < 0, open_at[0][None], open_at[1][None])  # that end of the wall open
+    rel = point[k] - a[s]
+    along = (rel * unit).sum(axis=1)
+    off_line = np.abs(rel[:, 0] * unit[:, 1] - rel[:, 1] * unit[:, 0])
+    beyond = np.maximum(-along, along - length)  # past the wall's nearer end (m)
+    across = np.abs((outward[k] * unit).sum(axis=1)) < math.cos(math.radians(GAP_ANGLE))
+    jamb = np.where(along < 0, open_at[0][s], open_at[1][s])  # that end of the wall open
     in_gap = (off_line < 2 * joint) & (beyond > 0) & (beyond <= GAP_REACH) & across & jamb
-    in_gap[np.arange(len(point)), piece] = False
-    return in_gap.any(axis=1)
+    out = np.zeros(len(point), dtype=bool)
+    out[k[in_gap]] = True
+    return out
 
 
 def openings(
@@ -280,11 +324,17 @@ def openings(
     targets = _nearest_ahead(ends, reach, cos_max)
     ahead = np.flatnonzero(np.isfinite(targets[:, 0]))
     crossing = _crossing(ends.point[ahead], targets[ahead], ends.a, ends.b, ends.piece[ahead])
+    kept = ahead[~crossing]
+    point, target = ends.point[kept], targets[kept]
+    # A span's key: its two ends in (x, y) order, to the centimetre; one span per key.
+    swap = (target[:, 0] < point[:, 0]) | (
+        (target[:, 0] == point[:, 0]) & (target[:, 1] < point[:, 1])
+    )
+    first, second = np.where(swap[:, None], target, point), np.where(swap[:, None], point, target)
+    keys = np.round(np.concatenate([first, second], axis=1), 2).tolist()
     found: dict[tuple[float, ...], Opening] = {}
-    for k in ahead[~crossing].tolist():
-        point, target = ends.point[k], targets[k]
-        key = tuple(np.round(np.concatenate(sorted([point, target], key=tuple)), 2).tolist())
-        found.setdefault(key, Opening(int(ends.wall[k]), point.copy(), target))
+    for k, key in enumerate(keys):
+        found.setdefault(tuple(key), Opening(int(ends.wall[kept[k]]), point[k], target[k]))
     return list(found.values())
 
 
@@ -302,21 +352,18 @@ def _facing_ends(ends: _Ends, config: RoomsConfig, used: set[tuple[float, ...]])
     """Passages between two free ends of one line of wall, facing each other (``passages``)."""
     gap = ends.point[None, :] - ends.point[:, None]  # (i, j): from end i to end j
     dist = np.hypot(gap[..., 0], gap[..., 1])
+    i, j = np.nonzero(np.triu((dist > config.door_max) & (dist <= config.passage_max), 1))
+    (gx, gy), dist = gap[i, j].T, dist[i, j]
+    (ox, oy), (px, py) = ends.outward[i].T, ends.outward[j].T
     cos_min = math.cos(math.radians(config.passage_angle))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        towards = np.einsum("ijk,ik->ij", gap, ends.outward) / dist
-        back = -np.einsum("ijk,jk->ij", gap, ends.outward) / dist
-    ok = (dist > config.door_max) & (dist <= config.passage_max)
-    ok &= (towards >= cos_min) & (back >= cos_min) & np.triu(np.ones_like(ok), 1).astype(bool)
-    pairs = np.argwhere(ok)
-    crossing = _crossing(
-        ends.point[pairs[:, 0]], ends.point[pairs[:, 1]], ends.a, ends.b, ends.piece[pairs[:, 0]]
-    )
+    facing = ((gx * ox + gy * oy) / dist >= cos_min) & (-(gx * px + gy * py) / dist >= cos_min)
+    i, j = i[facing], j[facing]
+    crossing = _crossing(ends.point[i], ends.point[j], ends.a, ends.b, ends.piece[i])
     found = []
-    for i, j in pairs[~crossing].tolist():
-        p, q = ends.point[i], ends.point[j]
+    for k, m in zip(i[~crossing].tolist(), j[~crossing].tolist(), strict=True):
+        p, q = ends.point[k], ends.point[m]
         if not {_end_key(p), _end_key(q)} & used:
-            found.append(Opening(int(ends.wall[i]), p.copy(), q.copy()))
+            found.append(Opening(int(ends.wall[k]), p.copy(), q.copy()))
             used |= {_end_key(p), _end_key(q)}
     return found
 
@@ -327,14 +374,16 @@ def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
     A segment's ends or the foot on it, within ``reach``, at most ``acos(cos_max)`` off the
     end's outward direction.
     """
-    n = len(ends.point)
-    if not n:
-        return np.zeros((0, 2))
-    points, dist, cosine = ends.targets
-    ok = (dist <= reach) & (cosine >= cos_max)
-    best = np.argmin(np.where(ok, dist, np.inf), axis=1)
-    out = points[np.arange(n), best].copy()
-    out[~ok.any(axis=1)] = np.nan
+    found = ends.targets
+    out = np.full((len(ends.point), 2), np.nan)
+    if not len(found.end):
+        return out
+    dist = np.where((found.dist <= reach) & (found.cosine >= cos_max), found.dist, np.inf)
+    first, group = found.groups
+    nearest = np.minimum.reduceat(dist, first)
+    hit = np.flatnonzero((dist == nearest[group]) & np.isfinite(dist))
+    _, once = np.unique(group[hit], return_index=True)  # the first of a tie
+    out[found.end[hit[once]]] = found.points[hit[once]]
     return out
 
 
@@ -344,26 +393,34 @@ def _end_key(point: Array) -> tuple[float, ...]:
 
 
 def _ends_of(spans: Sequence[Opening]) -> set[tuple[float, ...]]:
-    """The ends of ``spans`` as keys (``_end_key``)."""
-    return {_end_key(p) for s in spans for p in (s.p0, s.p1)}
+    """The ends of ``spans`` as keys (``_end_key``), rounded all at once."""
+    ends = np.array([p for s in spans for p in (s.p0, s.p1)]).reshape(-1, 2)
+    return set(map(tuple, np.round(ends, 3).tolist()))
 
 
 def _crossing(p: Array, q: Array, a: Array, b: Array, own: NDArray[np.int64]) -> NDArray[np.bool_]:
     """Per span p[k]-q[k]: does it pass through a segment other than ``own[k]`` (ends aside)?"""
-    d = (q - p)[:, None]  # (k, 1, 2)
-    e = (b - a)[None]  # (1, s, 2)
-    w = a[None] - p[:, None]  # (k, s, 2)
-    denom = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    low, high = np.minimum(a, b), np.maximum(a, b)
+    k, s = np.nonzero(  # boxes that meet: no crossing elsewhere
+        (lo[:, None, 0] <= high[None, :, 0])
+        & (hi[:, None, 0] >= low[None, :, 0])
+        & (lo[:, None, 1] <= high[None, :, 1])
+        & (hi[:, None, 1] >= low[None, :, 1])
+    )
+    k, s = k[s != own[k]], s[s != own[k]]
+    d, e, w = (q - p)[k], (b - a)[s], a[s] - p[k]
+    denom = d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / denom
-        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / denom
+        t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / denom
+        u = (w[:, 0] * d[:, 1] - w[:, 1] * d[:, 0]) / denom
     inner = (t > 0.02) & (t < 0.98) & (u > 0.02) & (u < 0.98)
     # Parallel (a span along the line of a wall's other piece) is no crossing: there the
     # fractions are noise over a vanishing denominator.
-    sizes = np.hypot(d[..., 0], d[..., 1]) * np.hypot(e[..., 0], e[..., 1])
-    inner &= np.abs(denom) > 1e-6 * sizes
-    inner[np.arange(len(p)), own] = False
-    return inner.any(axis=1)
+    inner &= np.abs(denom) > 1e-6 * np.hypot(d[:, 0], d[:, 1]) * np.hypot(e[:, 0], e[:, 1])
+    out = np.zeros(len(p), dtype=bool)
+    out[k[inner]] = True
+    return out
 
 
 class _Grid:
@@ -437,7 +494,9 @@ def find_rooms(
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
     base = np.zeros(grid.shape, dtype=bool)
-    ends = _free_ends(walls, config.joint)
+    ends = _free_ends(
+        walls, config.joint, max(config.door_max, config.passage_max, config.blind_max)
+    )
     grid.draw(base, ends.a, ends.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
@@ -458,11 +517,7 @@ def find_rooms(
     _grow(labels, barrier, math.ceil(radius / grid.cell))
     shapes = _shapes(grid, _cells_of(labels, len(rooms)), rooms, config, outlines)
     _bounding_walls(grid, labels, walls, shapes, radius)
-    doors = [
-        door
-        for span in spans
-        if span.width >= config.door_min and (door := _door(grid, labels, span, radius)) is not None
-    ]
+    doors = _doors(grid, labels, [s for s in spans if s.width >= config.door_min], radius)
     return Layout(shapes, doors)
 
 
@@ -475,7 +530,8 @@ def _draw_spans(
 
 def _divides(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> bool:
     """Whether the door part of a divider's span has two different rooms on its two sides."""
-    sides = _sides(grid, labels, Opening(span.wall, *(span.door or (span.p0, span.p1))), radius)
+    p0, p1 = span.door or (span.p0, span.p1)
+    (sides,), _, _ = _sides(grid, labels, p0[None], p1[None], radius)
     return min(sides) >= 0 and sides[0] != sides[1]
 
 
@@ -535,25 +591,25 @@ def _regions(
     regions, n = label(~barrier)
     leaky = touches_border(regions, n)
     min_cells = config.min_area / grid.cell**2
-    seen = np.bincount(regions[grid.free & (regions >= 0)], minlength=n)
-    size = np.bincount(regions[regions >= 0], minlength=n)
+    seen = _counts(np.where(grid.free, regions, -1), n)
     # Enclosed, and mostly seen: spans closed across unexplored space (it looks like glass:
     # nothing seen through) can enclose more unknown than floor; such a region is open.
-    leaky |= seen < config.closed_seen * size
+    leaky |= seen < config.closed_seen * _counts(regions, n)
     enclosed = np.flatnonzero((seen >= min_cells) & ~leaky)
     room_of = np.full(n + 1, -1, dtype=np.int32)  # region -> room; the last entry for -1
     room_of[enclosed] = np.arange(len(enclosed))
-    labels = room_of[regions]
     closed = [True] * len(enclosed)
-    open_floor = grid.free & ~barrier & (regions >= 0) & leaky[regions.clip(0)]
-    pieces, m = label(open_floor)
-    sizes = np.bincount(pieces[pieces >= 0], minlength=m)
-    kept = np.flatnonzero(sizes >= config.min_open_area / grid.cell**2)
+    pieces, m = label(grid.free & np.append(leaky, False)[regions])  # open regions' seen floor
+    kept = np.flatnonzero(_counts(pieces, m) >= config.min_open_area / grid.cell**2)
     piece_room = np.full(m + 1, -1, dtype=np.int32)
     piece_room[kept] = len(closed) + np.arange(len(kept))
-    in_piece = pieces >= 0
-    labels[in_piece] = piece_room[pieces[in_piece]]
+    labels = np.where(pieces >= 0, piece_room[pieces], room_of[regions])
     return labels, closed + [False] * len(kept)
+
+
+def _counts(labels: NDArray[np.int32], n: int) -> NDArray[np.int64]:
+    """Cells per label 0..n-1 (-1: none)."""
+    return np.bincount(labels.ravel() + 1, minlength=n + 1)[1:]
 
 
 def _fill_open(
@@ -620,12 +676,12 @@ def _grow(labels: NDArray[np.int32], barrier: NDArray[np.bool_], steps: int) -> 
 
 def _cells_of(labels: NDArray[np.int32], n: int) -> list[NDArray[np.int64]]:
     """Each room's cells (local (i, j)), from one pass over the grid."""
-    ii, jj = np.nonzero(labels >= 0)
-    room = labels[ii, jj]
-    order = np.argsort(room, kind="stable")
-    bounds = np.searchsorted(room[order], np.arange(n + 1))
-    cells = np.stack([ii, jj], axis=1)[order]
-    return [cells[bounds[k] : bounds[k + 1]] for k in range(n)]
+    flat = labels.ravel()
+    at = np.flatnonzero(flat >= 0)
+    order = np.argsort(flat[at], kind="stable")
+    bounds = np.cumsum(np.bincount(flat[at], minlength=n))
+    cells = np.stack(np.divmod(at[order], labels.shape[1]), axis=1)
+    return np.split(cells, bounds[:-1]) if n else []
 
 
 Outlines = dict[tuple[bool, bytes], RoomShape]  # (closed, global cells' bytes) -> shape
@@ -712,22 +768,28 @@ def _bounding_walls(
         shapes[room].walls.append(walls[k].id)
 
 
-def _door(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> DoorShape | None:
-    """The span as a door (step 3): seen through, and other rooms (or none) on its two sides."""
-    t = np.linspace(0.2, 0.8, 5)[:, None]
-    along = span.p0 + t * (span.p1 - span.p0)
-    i, j, ok = grid.local(along)
-    if not grid.free[i[ok], j[ok]].any() and not _free_near(grid, along):
-        return None  # never crossed: glass or a niche, wall for the rooms
-    sides, normal = _sides(grid, labels, span, radius), _normal(span)
-    sides_dir = normal if sides[0] < 0 else -normal
-    if sides[0] == sides[1] or max(sides) < 0:
-        return None
-    if min(sides) < 0 and not _free_near(grid, along + (radius + 2.5 * grid.cell) * sides_dir):
-        return None  # towards no room, and nothing seen beyond it either: not an opening
-    rooms = tuple(sorted(s for s in sides if s >= 0))
-    p0, p1 = span.door or (span.p0, span.p1)
-    return DoorShape(p0, p1, span.wall, rooms)
+def _doors(
+    grid: _Grid, labels: NDArray[np.int32], spans: list[Opening], radius: float
+) -> list[DoorShape]:
+    """The spans that are doors (step 3): seen through, and other rooms (or none) each side."""
+    if not spans:
+        return []
+    p0, p1 = np.array([s.p0 for s in spans]), np.array([s.p1 for s in spans])
+    sides, along, normal = _sides(grid, labels, p0, p1, radius)
+    crossed = _free_near(grid, along)  # else never crossed: glass or a niche, wall for the rooms
+    # Towards no room, and nothing seen beyond it either: not an opening.
+    towards_none = np.where((sides[:, 0] < 0)[:, None], normal, -normal)
+    beyond = _free_near(grid, along + (radius + 2.5 * grid.cell) * towards_none[:, None])
+    lone = sides.min(axis=1) < 0
+    door = crossed & (sides[:, 0] != sides[:, 1]) & (sides.max(axis=1) >= 0) & (~lone | beyond)
+    return [
+        DoorShape(
+            *(span.door or (span.p0, span.p1)), span.wall, tuple(sorted(r for r in two if r >= 0))
+        )
+        for span, two in zip(
+            [spans[k] for k in np.flatnonzero(door)], sides[door].tolist(), strict=True
+        )
+    ]
 
 
 def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array]:
@@ -756,29 +818,35 @@ def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array
     return span.p0 + lo * (span.p1 - span.p0), span.p0 + hi * (span.p1 - span.p0)
 
 
-def _normal(span: Opening) -> Array:
-    d = span.p1 - span.p0
-    return np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-12)
+def _sides(
+    grid: _Grid, labels: NDArray[np.int32], p0: Array, p1: Array, radius: float
+) -> tuple[NDArray[np.int64], Array, Array]:
+    """The room each side of spans p0[k]-p1[k] (n, 2), -1 for none.
 
-
-def _sides(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> list[int]:
-    """The room on each side of a span (-1: none): most of its labels just past the barrier."""
-    along = span.p0 + np.linspace(0.2, 0.8, 5)[:, None] * (span.p1 - span.p0)
-    normal = _normal(span)
-    sides: list[int] = []
+    Each side's is the most common label (the smallest of a tie) at five points along the
+    span, just past the barrier. Also the five points (n, 5, 2) and each span's unit normal
+    (n, 2), the first side's way.
+    """
+    along = p0[:, None] + np.linspace(0.2, 0.8, 5)[None, :, None] * (p1 - p0)[:, None]
+    d = p1 - p0
+    normal = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    normal /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
+    sides = []
     for side in (normal, -normal):
-        i, j, ok = grid.local(along + (radius + 2.5 * grid.cell) * side)
-        found = labels[i[ok], j[ok]]
-        found = found[found >= 0]
-        sides.append(int(np.bincount(found).argmax()) if len(found) else -1)
-    return sides
+        i, j, ok = grid.local(along + (radius + 2.5 * grid.cell) * side[:, None])
+        found = np.where(ok, labels[i, j], -1)  # (n, 5)
+        valid = found >= 0
+        count = ((found[:, :, None] == found[:, None, :]) & valid[:, None, :]).sum(axis=2) * valid
+        best = np.argmax(count * (found.max() + 2) - found, axis=1)  # most, then smallest
+        sides.append(np.where(valid.any(axis=1), found[np.arange(len(found)), best], -1))
+    return np.stack(sides, axis=1), along, normal
 
 
-def _free_near(grid: _Grid, points: Array) -> bool:
-    """Seen free floor within a cell of the points (the opening's own cells are barrier-drawn)."""
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            i, j, ok = grid.local(points + grid.cell * np.array([di, dj]))
-            if grid.free[i[ok], j[ok]].any():
-                return True
-    return False
+def _free_near(grid: _Grid, points: Array) -> NDArray[np.bool_]:
+    """Per span, seen free floor within a cell of any of its points (n, m, 2).
+
+    Within a cell, not on: the opening's own cells are barrier-drawn.
+    """
+    steps = np.array([(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)]) * grid.cell
+    i, j, ok = grid.local(points[:, :, None] + steps)
+    return (grid.free[i, j] & ok).any(axis=(1, 2))

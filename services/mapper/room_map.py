@@ -113,15 +113,48 @@ class RoomsReply:
 
 @dataclass
 class _Kept:
-    """An id'd room between updates: its cells as sorted keys, for overlap with the next."""
+    """An id'd room between updates: its cells (global (i, j)), for overlap with the next."""
 
     id: int
-    keys: NDArray[np.int64]
+    cells: NDArray[np.int64]
 
 
 def _keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     """Cells (i, j), each once, as single integers, sorted."""
     return np.sort((cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF))
+
+
+def _cells(keys: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Inverse of ``_keys``: the low 32 bits are j, signed."""
+    j = keys & 0xFFFFFFFF
+    return np.stack([keys >> 32, np.where(j >= 1 << 31, j - (1 << 32), j)], axis=1)
+
+
+def _overlaps(kept: list[_Kept], cells: list[NDArray[np.int64]]) -> list[tuple[int, int, int]]:
+    """(cells shared, new room, old id) of rooms sharing ``KEEP_SHARE`` of the smaller's cells.
+
+    The old rooms are written into a grid of their indices (rooms do not overlap), every new
+    cell looked up in it at once, and the shared cells counted per pair.
+    """
+    if not kept or not cells:
+        return []
+    oi, oj = np.concatenate([k.cells for k in kept]).T
+    low, high = (int(oi.min()), int(oj.min())), (int(oi.max()), int(oj.max()))
+    grid = np.full((high[0] - low[0] + 1, high[1] - low[1] + 1), -1, dtype=np.int64)
+    grid[oi - low[0], oj - low[1]] = np.repeat(np.arange(len(kept)), [len(k.cells) for k in kept])
+    ni, nj = np.concatenate(cells).T
+    room = np.repeat(np.arange(len(cells)), [len(c) for c in cells])
+    inside = (ni >= low[0]) & (ni <= high[0]) & (nj >= low[1]) & (nj <= high[1])
+    owner = np.full(len(room), -1, dtype=np.int64)
+    owner[inside] = grid[ni[inside] - low[0], nj[inside] - low[1]]
+    hit = owner >= 0
+    shared = np.bincount(room[hit] * len(kept) + owner[hit], minlength=len(cells) * len(kept))
+    pairs = []
+    for k, m in np.argwhere(shared.reshape(len(cells), len(kept)) > 0).tolist():
+        count = int(shared[k * len(kept) + m])
+        if count >= KEEP_SHARE * min(len(cells[k]), len(kept[m].cells)):
+            pairs.append((count, k, kept[m].id))
+    return pairs
 
 
 def _pack(keys: NDArray[np.int64]) -> str:
@@ -230,6 +263,10 @@ class RoomMap:
             )
             for k, d in enumerate(layout.doors)
         )
+        doors_of: dict[int, list[int]] = {}
+        for door in doors:
+            for room in door.rooms:
+                doors_of.setdefault(room, []).append(door.id)
         rooms = tuple(
             RoomRecord(
                 id=room_ids[k],
@@ -237,7 +274,7 @@ class RoomMap:
                 area=round(r.area, 3),
                 centroid=_pt(r.centroid),
                 walls=tuple(sorted(r.walls)),
-                doors=tuple(sorted(d.id for d in doors if room_ids[k] in d.rooms)),
+                doors=tuple(sorted(doors_of.get(room_ids[k], []))),
                 closed=r.closed,
             )
             for k, r in enumerate(layout.rooms)
@@ -246,28 +283,12 @@ class RoomMap:
 
     def _room_ids(self, rooms: list[RoomShape]) -> list[int]:
         """Each new room's id: the old room it overlaps most, else a new one."""
-        keys = [_keys(r.cells) for r in rooms]
-        old_keys = np.concatenate([k.keys for k in self.kept] + [np.zeros(0, dtype=np.int64)])
-        old_ids = np.concatenate(
-            [np.full(len(k.keys), k.id) for k in self.kept] + [np.zeros(0, dtype=np.int64)]
-        )
-        order = np.argsort(old_keys)
-        old_keys, old_ids = old_keys[order], old_ids[order]
-        sizes = {k.id: len(k.keys) for k in self.kept}
-        pairs = []
-        for k, mine in enumerate(keys):
-            if not len(old_keys):
-                break
-            at = np.clip(np.searchsorted(old_keys, mine), 0, len(old_keys) - 1)
-            owners, shared = np.unique(old_ids[at[old_keys[at] == mine]], return_counts=True)
-            for old_id, count in zip(owners.tolist(), shared.tolist(), strict=True):
-                if count >= KEEP_SHARE * min(len(mine), sizes[old_id]):
-                    pairs.append((count, k, old_id))
-        ids = _greedy(sorted(pairs, reverse=True))
+        cells = [r.cells for r in rooms]
+        ids = _greedy(sorted(_overlaps(self.kept, cells), reverse=True))
         for k in range(len(rooms)):
             if k not in ids:
                 ids[k], self.next_room = self.next_room, self.next_room + 1
-        self.kept = [_Kept(ids[k], mine) for k, mine in enumerate(keys)]
+        self.kept = [_Kept(ids[k], mine) for k, mine in enumerate(cells)]
         return [ids[k] for k in range(len(rooms))]
 
     def _door_ids(self, doors: list[DoorShape]) -> list[int]:
@@ -296,7 +317,7 @@ class RoomMap:
             "free": self.free.to_json(),
             "next_room": self.next_room,
             "next_door": self.next_door,
-            "rooms": [{"id": k.id, "cells": _pack(k.keys)} for k in self.kept],
+            "rooms": [{"id": k.id, "cells": _pack(_keys(k.cells))} for k in self.kept],
             "doors": [{"id": i, "center": c.tolist()} for i, c in self.doors.items()],
         }
 
@@ -305,7 +326,7 @@ class RoomMap:
         try:
             self.free = FreeSpace.from_json(data["free"])
             self.next_room, self.next_door = int(data["next_room"]), int(data["next_door"])
-            self.kept = [_Kept(int(r["id"]), _unpack(r["cells"])) for r in data["rooms"]]
+            self.kept = [_Kept(int(r["id"]), _cells(_unpack(r["cells"]))) for r in data["rooms"]]
             self.doors = {
                 int(d["id"]): np.asarray(d["center"], dtype=float).reshape(2) for d in data["doors"]
             }

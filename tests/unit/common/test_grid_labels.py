@@ -53,6 +53,23 @@ def test_labels_are_the_four_connected_components(seed: int) -> None:
     assert len({int(labels[next(iter(p))]) for p in expected}) == n, "and no two share one"
 
 
+def test_a_serpentine_is_one_component_labelled_row_major() -> None:
+    """A long chain of runs, each joined to the last only at one end: the joining rounds must
+    carry one label the whole way. Components are numbered by their first cell, row-major."""
+    mask = np.zeros((41, 30), dtype=bool)
+    mask[::2, 1:-1] = True
+    mask[1::4, -2] = True
+    mask[3::4, 1] = True
+    island = (1, 0)
+    mask[island] = True
+    labels, n = label(mask)
+    assert n == 2
+    assert labels[0, 1] == 0, "the serpentine's first cell comes first"
+    assert labels[island] == 1
+    assert set(np.unique(labels[mask]).tolist()) == {0, 1}
+    assert (labels == 1).sum() == 1
+
+
 def test_a_region_reaching_the_edge_is_open() -> None:
     mask = np.zeros((10, 10), dtype=bool)
     mask[2:5, 2:5] = True  # enclosed

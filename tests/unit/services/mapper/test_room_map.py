@@ -8,7 +8,7 @@ import numpy as np
 
 from wallmap.common.map_records import WallRecord
 from wallmap.scene.floorplan import free_rays, generate_floorplan, smooth_route
-from wallmap.services.mapper.room_map import RoomMap
+from wallmap.services.mapper.room_map import RoomMap, _cells, _keys
 
 
 def _records(plan) -> tuple[WallRecord, ...]:
@@ -59,3 +59,10 @@ def test_ids_stay_as_the_map_grows_and_across_a_restart() -> None:
     assert [(d.id, d.center) for d in again.doors] == [(d.id, d.center) for d in second.doors]
     more = restarted.update(_records(plan)[:-1], 4.0)  # a wall gone: the rooms may change
     assert max(r.id for r in more.rooms) < restarted.next_room
+
+
+def test_cells_come_back_from_their_keys_on_every_side_of_the_origin() -> None:
+    """The state file keeps a room's cells as sorted integer keys, negative indices too."""
+    cells = np.array([[3, -5], [-2, 7], [0, 0], [-1, -1], [100_000, -(2**31)], [5, 2**31 - 1]])
+    back = _cells(_keys(cells))
+    assert sorted(map(tuple, back.tolist())) == sorted(map(tuple, cells.tolist()))
