@@ -76,6 +76,7 @@ class WallRecord:
         tentative: Not yet confirmed, or a shadow of a better-seen wall.
         first_seen: Stamp of its first observation.
         last_seen: Stamp of its last observation.
+        sources: In a fleet's map, each robot's wall fused into it: (robot prefix, its id).
     """
 
     id: int
@@ -90,6 +91,7 @@ class WallRecord:
     tentative: bool = False
     first_seen: float | None = None
     last_seen: float | None = None
+    sources: tuple[tuple[str, int], ...] = ()
 
     @property
     def length(self) -> float:
@@ -97,7 +99,8 @@ class WallRecord:
         return math.dist(self.p0, self.p1)
 
     def to_map(self) -> dict[str, Any]:
-        """The contract's record, plain values for msgpack or JSON."""
+        """The contract's record, plain values for msgpack or JSON (``sources`` in a fleet's)."""
+        sources = {"sources": [{"robot": r, "id": i} for r, i in self.sources]}
         return {
             "id": self.id,
             "u": self.u,
@@ -111,6 +114,7 @@ class WallRecord:
             "tentative": self.tentative,
             "first_seen": self.first_seen,
             "last_seen": self.last_seen,
+            **(sources if self.sources else {}),
         }
 
     @classmethod
@@ -132,6 +136,7 @@ class WallRecord:
                 tentative=m.get("tentative", False),
                 first_seen=_stamp(m.get("first_seen"), "first_seen"),
                 last_seen=_stamp(m.get("last_seen"), "last_seen"),
+                sources=tuple(_source(x) for x in _list(m.get("sources", []), "sources")),
             )
         except KeyError as err:
             raise MessageError(f"wall record lacks {err}") from None
@@ -140,6 +145,15 @@ class WallRecord:
         ends = [record.p0, record.p1, *(end for segment in record.segments for end in segment)]
         check_coordinates([(record.u, record.v), *ends], "a wall")
         return record
+
+
+def _source(value: Any) -> tuple[str, int]:
+    """A fleet wall's source: ``{"robot": prefix, "id": its wall id there}``."""
+    table = _table(value, "a wall's source")
+    robot = table.get("robot")
+    if not isinstance(robot, str) or not robot:
+        raise MessageError(f"field 'sources' holds {value!r}, not a robot and an id")
+    return robot, _integer(table.get("id"), "sources")
 
 
 def _with_default(value: Any, default: Any) -> Any:

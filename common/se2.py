@@ -127,6 +127,17 @@ def inverse(a: Array) -> Array:
     return between(a, np.zeros(3))
 
 
+def inverse_jacobian(a: Array) -> Array:
+    """The Jacobian of :func:`inverse` with respect to ``a``, 3x3.
+
+    A frame placed with some uncertainty places its parent's origin with the uncertainty
+    this carries over (a robot's map frame in a fleet's, seen the other way round).
+    """
+    c, s = math.cos(a[2]), math.sin(a[2])
+    x, y = float(a[0]), float(a[1])
+    return np.array([[-c, -s, s * x - c * y], [s, -c, c * x + s * y], [0.0, 0.0, -1.0]])
+
+
 def compose_jacobians(a: Array, b: Array) -> tuple[Array, Array]:
     """The Jacobians of ``compose(a, b)`` with respect to ``a`` and to ``b``, 3x3 each.
 

@@ -348,6 +348,11 @@ class Keys:
         return f"{self.prefix}/map/rooms/updates"
 
     @property
+    def robots(self) -> str:
+        """Queryable of a fleet's merge service: where each robot's map frame lies."""
+        return f"{self.prefix}/robots"
+
+    @property
     def progress(self) -> str:
         """Mapper acknowledgements of the frames of each player run."""
         return f"{self.prefix}/mapper/progress"

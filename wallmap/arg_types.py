@@ -29,6 +29,15 @@ def non_negative(value: str) -> float:
     return x
 
 
+def robot_prefixes(value: str) -> list[str]:
+    """``A,B[,...]``: two or more distinct robot prefixes (the first one's frame is the fleet's)."""
+    robots = [part.strip() for part in value.split(",")]
+    if len(robots) < 2 or not all(robots) or len(set(robots)) != len(robots):
+        msg = f"must be two or more distinct robot prefixes, A,B[,...], got {value!r}"
+        raise argparse.ArgumentTypeError(msg)
+    return robots
+
+
 def port(value: str) -> int:
     """A TCP port, 0 for any free one."""
     number = int(value)

@@ -20,7 +20,14 @@ from typing import Any, NoReturn
 import zenoh
 
 from wallmap import __version__
-from wallmap.arg_types import finite, non_negative, picture, positive, positive_int
+from wallmap.arg_types import (
+    finite,
+    non_negative,
+    picture,
+    positive,
+    positive_int,
+    robot_prefixes,
+)
 from wallmap.common.delivery import StalledError
 from wallmap.common.map_query import MapQuery, QueryError, fetch_map
 from wallmap.common.map_records import MapReply
@@ -67,6 +74,7 @@ from wallmap.services.detector import service as detector_service
 from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import make_pose_input
 from wallmap.services.mapper.state_file import StateError
+from wallmap.services.merge import service as merge_service
 from wallmap.services.odometry import service as odometry_service
 from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
@@ -135,6 +143,12 @@ def _cmd_ros2(_: argparse.Namespace, config: Config) -> int:
 def _cmd_odometry(_: argparse.Namespace, config: Config) -> int:
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     odometry_service.run(zenoh_settings, config.odometry, stop_on_signals(), config.history)
+    return 0
+
+
+def _cmd_merge(args: argparse.Namespace, config: Config) -> int:
+    zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
+    merge_service.run(zenoh_settings, args.robots, stop_on_signals())
     return 0
 
 
@@ -230,10 +244,16 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
         rate_hz=args.rate,
         compress=args.compress,
         faults=faults,
+        reverse=args.reverse,
+        own_frame=args.own_frame,
     )
     seen = sum(1 for n in info.seen_counts.values() if n >= 3)
     print(f"wrote {info.path}: {info.n_frames} frames, {seen} walls seen in 3 frames or more")
     print(f"ground truth: {info.truth_path}")
+    if args.own_frame:
+        x, y, yaw = info.map_in_world
+        where = f"x {x:.3f} m, y {y:.3f} m, yaw {math.degrees(yaw):.2f} deg"
+        print(f"its map frame in the plan's frame: {where} (map_in_world in the ground truth)")
     if faults.any:
         print(f"the faulty poses as a TUM file: {tum_path_for(info.path)}")
     return 0
@@ -314,6 +334,17 @@ def build_parser() -> argparse.ArgumentParser:
     add_command(sub, "odometry", "poses from the sensor frames (scan matching)", _cmd_odometry,
                 ODOMETRY, HISTORY, ZENOH)  # fmt: skip
 
+    p = add_command(
+        sub, "merge", "one map of several robots' maps, aligned by their walls", _cmd_merge, ZENOH
+    )
+    p.add_argument(
+        "--robots",
+        type=robot_prefixes,
+        required=True,
+        metavar="A,B[,...]",
+        help="the robots' prefixes; the fleet's map is in the first one's frame",
+    )
+
     add_command(sub, "ros2", "a live ROS 2 robot's topics on Zenoh -> frames and poses",
                 _cmd_ros2, ROS2, HISTORY, ZENOH)  # fmt: skip
 
@@ -354,6 +385,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--height", type=int, default=120, help="image height (px)")
     p.add_argument("--rate", type=positive, default=15.0, help="frames per second")
     p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
+    p.add_argument(
+        "--reverse",
+        action="store_true",
+        help="drive the plan's route the other way, from its end to its start: "
+        "another robot's drive through the same building",
+    )
+    p.add_argument(
+        "--own-frame",
+        action="store_true",
+        help="every pose of the bag (tf, /odom, /ground_truth, /amcl_pose, the TUM file) in a "
+        "map frame at the robot's first pose; the ground truth's map_in_world places that "
+        "frame in the plan's",
+    )
     p.add_argument("--pose-latency", type=finite, default=0.0, metavar="SECONDS",
                    help="every pose source of the bag late by this: its pose stamped t is the "
                    "robot's at t - SECONDS")  # fmt: skip

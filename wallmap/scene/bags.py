@@ -6,7 +6,9 @@ perfect localiser would record: static tf for the sensor mount, odometry that dr
 equal the true pose, the true pose on /ground_truth and, as an AMCL-like localiser would
 publish it, on /amcl_pose, and the sensor data as a point cloud, a depth image or a laser
 scan. The ground truth file ``<bag>.truth.json`` holds the plan, the true trajectory and
-how often the detector could have seen each wall.
+how often the detector could have seen each wall, all in the plan's (the world's) frame, and
+where the bag's map frame lies in it: the world frame itself, or, for a robot of a fleet
+whose map starts where it was switched on, its first pose (``own_frame``).
 """
 
 from __future__ import annotations
@@ -108,6 +110,8 @@ class SceneInfo:
         plan: The scene.
         trajectory: True base_link poses at the sensor stamps.
         seen_counts: Per wall id, the number of frames in which the detector could see it.
+        map_in_world: Where the bag's map frame lies in the plan's frame, ``(x, y, yaw)``:
+            ``world_point = map_in_world * map_point`` (see :func:`load_map_in_world`).
     """
 
     path: Path
@@ -116,6 +120,7 @@ class SceneInfo:
     plan: FloorPlan
     trajectory: Trajectory
     seen_counts: dict[int, int]
+    map_in_world: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def stamp_to_ns(stamp: float) -> int:
@@ -441,6 +446,30 @@ def camera_info(sink: BagSink, stamp_ns: int, camera: Camera, frame: str = OPTIC
     )
 
 
+def _pose_sources(
+    fine: Trajectory,
+    seed: int,
+    drift: tuple[float, float],
+    faults: PoseFaults | None,
+    map_in_world: tuple[float, float, float],
+) -> tuple[Trajectory, Trajectory]:
+    """What the bag's pose sources say of the true drive ``fine``: (poses, odometry).
+
+    The odometry drifts from the true first pose; the poses are the truth, or the truth as a
+    source with ``faults`` has it (and so is the odometry then). Both in the map frame placed
+    at ``map_in_world`` in the plan's frame, as a robot whose map starts where it was switched
+    on has them; a rigid move changes neither the drift nor the faults. The identity leaves
+    them bit for bit as they are, so bags in the plan's frame stay the same.
+    """
+    odom = drifting_odometry(fine, seed, drift_xy=drift[0], drift_yaw_deg=drift[1])
+    posed = fine
+    if faults is not None and faults.any:
+        posed, odom = faults.apply(fine), faults.apply(odom)
+    if map_in_world == (0.0, 0.0, 0.0):
+        return posed, odom
+    return posed.relative_to(map_in_world), odom.relative_to(map_in_world)
+
+
 def write_scene_bag(
     path: str | Path,
     *,
@@ -455,6 +484,8 @@ def write_scene_bag(
     compress: bool = False,
     odometry_drift: tuple[float, float] = (0.02, 1.0),
     faults: PoseFaults | None = None,
+    reverse: bool = False,
+    own_frame: bool = False,
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
@@ -491,6 +522,15 @@ def write_scene_bag(
             faulty pose, /odom, /ground_truth and /amcl_pose carry the faults too, and the
             faulty poses are also written as a TUM file, ``<path>.poses.tum``. The truth file
             keeps the true trajectory.
+        reverse: Drive the plan's route the other way, from its last waypoint to its first
+            (``generate_trajectory``): another robot's drive through the same building.
+        own_frame: Give every pose of the bag (tf ``map -> odom`` and ``odom -> base_link``,
+            /odom, /ground_truth, /amcl_pose, the TUM file) in a map frame at the robot's true
+            first pose, as a robot of a fleet has its own map; the first ground-truth pose is
+            then (0, 0, 0). The sensor data are the same, and the truth file keeps the plan and
+            the trajectory in the plan's frame and says where the map frame lies in it
+            (``map_in_world``, read by :func:`load_map_in_world`): score a map of the bag
+            after moving it by that.
 
     Returns:
         What was written, including the per-wall seen counts.
@@ -509,17 +549,17 @@ def write_scene_bag(
 
     # Sampled at twice the sensor rate: even samples are sensor frames, odd ones are the
     # extra odom → base_link transforms between them.
-    fine = generate_trajectory(plan, traj_seed, rate_hz=2 * rate_hz)
+    fine = generate_trajectory(plan, traj_seed, rate_hz=2 * rate_hz, reverse=reverse)
     n_frames = min(n_frames, (len(fine) + 1) // 2)
-    fine = fine.sliced(slice(0, 2 * n_frames - 1))
-    odom = drifting_odometry(fine, odom_seed, drift_xy=odometry_drift[0],
-                             drift_yaw_deg=odometry_drift[1])  # fmt: skip
+    fine = fine.sliced(slice(0, 2 * n_frames - 1))  # true poses in the plan's frame
     truth = fine.sliced(slice(None, None, 2))
-    posed = fine  # what the pose sources say: the truth, or the truth as a faulty source has it
-    if faults is not None and faults.any:
-        posed, odom = faults.apply(fine), faults.apply(odom)
+    map_in_world = fine.pose_at(0) if own_frame else (0.0, 0.0, 0.0)
+    # What the bag says: the truth, or the truth as a faulty source has it; in the bag's map.
+    posed, odom = _pose_sources(fine, odom_seed, odometry_drift, faults, map_in_world)
+    faulty = faults is not None and faults.any
+    if faulty:
         write_tum(posed, tum_path_for(path))
-    every_map_odom = 1 if posed is not fine else _MAP_ODOM_EVERY
+    every_map_odom = 1 if faulty else _MAP_ODOM_EVERY
     twist = _body_twist(odom)
     stamps_ns = [stamp_to_ns(s) for s in fine.stamps]
     rng = np.random.default_rng(noise_seed)
@@ -600,10 +640,12 @@ def write_scene_bag(
                 "trajectory": truth.to_json(),
                 "stamps_ns": stamps_ns[::2],
                 "seen_counts": {str(k): v for k, v in seen_counts.items()},
+                "reverse": reverse,
+                "map_in_world": list(map_in_world),
             }
         )
     )
-    return SceneInfo(path, truth_path, n_frames, plan, truth, seen_counts)
+    return SceneInfo(path, truth_path, n_frames, plan, truth, seen_counts, map_in_world)
 
 
 def load_truth(truth_path: str | Path) -> tuple[FloorPlan, Trajectory, dict[int, int]]:
@@ -611,3 +653,15 @@ def load_truth(truth_path: str | Path) -> tuple[FloorPlan, Trajectory, dict[int,
     data = json.loads(Path(truth_path).read_text())
     seen = {int(k): int(v) for k, v in data["seen_counts"].items()}
     return FloorPlan.from_json(data["plan"]), Trajectory.from_json(data["trajectory"]), seen
+
+
+def load_map_in_world(truth_path: str | Path) -> tuple[float, float, float]:
+    """Where a scene bag's map frame lies in its plan's frame: ``(x, y, yaw)``.
+
+    The transform T with ``world_point = T * map_point``: a map made from the bag, moved by it,
+    can be scored against the plan. The identity for bags whose poses are in the plan's frame,
+    which older truth files (without the key) all are.
+    """
+    data = json.loads(Path(truth_path).read_text())
+    x, y, yaw = data.get("map_in_world", (0.0, 0.0, 0.0))
+    return float(x), float(y), float(yaw)

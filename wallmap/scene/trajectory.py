@@ -40,6 +40,16 @@ class Trajectory:
         """The samples selected by ``index``, e.g. ``slice(None, None, 2)`` for every other."""
         return Trajectory(self.stamps[index], self.x[index], self.y[index], self.yaw[index])
 
+    def relative_to(self, origin: tuple[float, float, float]) -> Trajectory:
+        """The same poses in the frame that pose ``origin`` places: ``origin^-1 * pose`` each.
+
+        A robot's map starts where it was switched on, not in the building's frame; its poses
+        relative to its first one are what it would have published.
+        """
+        x0, y0, yaw0 = origin
+        x, y = se2.unrotate((self.x - x0, self.y - y0), yaw0)
+        return Trajectory(self.stamps.copy(), x, y, se2.wrap(self.yaw - yaw0))
+
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form for ground-truth files."""
         return {
@@ -74,6 +84,7 @@ def generate_trajectory(
     speed: float = 0.4,
     start_stamp: float = 1_700_000_000.0,
     sweep_deg: float = 60.0,
+    reverse: bool = False,
 ) -> Trajectory:
     """Drive once along the plan's route, sweeping the sensor left and right.
 
@@ -83,7 +94,9 @@ def generate_trajectory(
     sinusoidal sweep of +-``sweep_deg`` (random period 7-10 s and phase), so that side
     walls are seen and not only the walls ahead. The path depends only on the plan; the
     seed changes the sweep. Sampling the same plan and seed at another rate gives samples
-    of the same continuous trajectory.
+    of the same continuous trajectory. ``reverse`` drives the same path the other way, as a
+    second robot mapping the same building would: from rest at the route's end, facing along
+    the path, to rest at its start.
 
     Args:
         plan: Plan with a route.
@@ -92,16 +105,19 @@ def generate_trajectory(
         speed: Cruise speed in m/s.
         start_stamp: Stamp of the first sample, seconds.
         sweep_deg: Amplitude of the yaw sweep around the heading.
+        reverse: Drive the route from its last waypoint to its first.
 
     Returns:
-        The trajectory, sampled from rest at the route's start to rest at its end.
+        The trajectory, sampled from rest at the route's start to rest at its end (or from
+        its end to its start, if ``reverse``).
 
     Raises:
         ValueError: If the plan has no route.
     """
     if len(plan.route) < 2:
         raise ValueError("the plan has no route to drive along")
-    curve = smooth_route(plan.route)
+    # Corner cutting is symmetric: the reversed route's curve is the forward one, reversed.
+    curve = smooth_route(plan.route[::-1] if reverse else plan.route)
     steps = np.linalg.norm(np.diff(curve, axis=0), axis=1)
     keep = np.concatenate([[True], steps > 1e-9])
     curve = curve[keep]

@@ -4,9 +4,11 @@ from collections import Counter, defaultdict
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, run_wallmap
 from rosbags.highlevel import AnyReader
 
+from wallmap import offline
+from wallmap.evaluation import evaluate_map
 from wallmap.scene import (
     AMCL_POSE_TOPIC,
     CAMERA_INFO_TOPIC,
@@ -21,6 +23,7 @@ from wallmap.scene import (
     Camera,
     FloorPlan,
     Furniture,
+    PoseFaults,
     Scanner,
     Wall,
     clearance,
@@ -28,6 +31,7 @@ from wallmap.scene import (
     drifting_odometry,
     generate_floorplan,
     generate_trajectory,
+    load_map_in_world,
     load_truth,
     read_tum,
     render_depth,
@@ -900,3 +904,209 @@ def test_tum_round_trip(tmp_path):
     np.testing.assert_allclose(back.x, traj.x, atol=1e-9)
     np.testing.assert_allclose(back.y, traj.y, atol=1e-9)
     np.testing.assert_allclose(np.angle(np.exp(1j * (back.yaw - traj.yaw))), 0.0, atol=1e-8)
+
+
+# --- a fleet's second robot: the route driven backwards, poses in its own map frame --------
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_reversed_drive_starts_where_the_forward_one_ends(seed):
+    plan = generate_floorplan(seed)
+    forward = generate_trajectory(plan, seed, rate_hz=15.0)
+    backward = generate_trajectory(plan, seed, rate_hz=15.0, reverse=True)
+    xy = backward.positions
+
+    np.testing.assert_allclose(xy[0], plan.route[-1], atol=1e-9)
+    # A drive's last sample is up to one frame before its end: 1 mm short, braking.
+    np.testing.assert_allclose(xy[0], forward.positions[-1], atol=1e-3)
+    np.testing.assert_allclose(xy[-1], plan.route[0], atol=1e-3)
+    assert len(backward) == len(forward)  # the same path, as long
+    # The same building: the same path (to within half a 2.7 cm step), every doorway, clear.
+    gaps = np.linalg.norm(xy[:, None] - forward.positions[None], axis=2)
+    assert max(gaps.min(axis=0).max(), gaps.min(axis=1).max()) < 0.015
+    assert clearance(plan, xy).min() >= 0.6
+    for centre in doorway_centres(plan):
+        assert np.linalg.norm(xy - centre, axis=1).min() < 0.03
+
+    # As smooth as the forward drive, and it faces along its own way, not back along the route.
+    velocity = np.diff(xy, axis=0) * 15.0
+    speed = np.linalg.norm(velocity, axis=1)
+    assert speed[0] < 0.05
+    assert speed.max() == pytest.approx(0.4, abs=1e-3)
+    assert np.linalg.norm(np.diff(velocity, axis=0), axis=1).max() < 0.05
+    assert np.abs(np.diff(np.unwrap(backward.yaw))).max() < math.radians(5.0)
+    heading = np.arctan2(velocity[:, 1], velocity[:, 0])
+    off_heading = np.degrees(np.angle(np.exp(1j * (backward.yaw[1:] - heading))))
+    assert np.abs(off_heading[speed > 0.01]).max() < 62.0
+
+
+def planar_poses(messages):
+    """/ground_truth, /amcl_pose and /odom as {topic: [(x, y, yaw)]}, and tf as {ns: pose}."""
+    poses = {
+        topic: [
+            (p.position.x, p.position.y, quat_yaw(p.orientation))
+            for p in (m.pose if topic == GROUND_TRUTH_TOPIC else m.pose.pose for _, m in msgs)
+        ]
+        for topic, msgs in messages.items()
+        if topic in (GROUND_TRUTH_TOPIC, AMCL_POSE_TOPIC, ODOM_TOPIC)
+    }
+    map_odom, odom_base = {}, {}
+    for _, msg in messages[TF_TOPIC]:
+        for tf in msg.transforms:
+            t = tf.transform
+            pose = (t.translation.x, t.translation.y, quat_yaw(t.rotation))
+            key = (tf.header.frame_id, tf.child_frame_id)
+            {("map", "odom"): map_odom, ("odom", "base_link"): odom_base}[key][
+                header_ns(tf.header)
+            ] = pose
+    return poses, map_odom, odom_base
+
+
+def assert_in_world(pose, map_in_world, world):
+    """``map_in_world * pose`` is the world pose, to 1 mm and 0.01 degrees."""
+    moved = se2(*map_in_world) @ se2(*pose)
+    assert math.dist(moved[:2, 2], world[:2]) < 1e-3
+    yaw_error = math.remainder(math.atan2(moved[1, 0], moved[0, 0]) - world[2], 2 * math.pi)
+    assert abs(math.degrees(yaw_error)) < 0.01
+
+
+def sensor_data(messages):
+    """The sensor messages' payloads and frames, which a map frame must not change."""
+    return [
+        (bytes(msg.data) if hasattr(msg, "data") else msg.ranges.tobytes(), msg.header.frame_id)
+        for topic in (POINTS_TOPIC, IMAGE_TOPIC, SCAN_TOPIC)
+        for _, msg in messages.get(topic, [])
+    ]
+
+
+@pytest.mark.parametrize(
+    ("fmt", "sensor"),
+    [("ros1", "depth16"), ("ros2-mcap", "laserscan"), ("ros2-sqlite3", "pointcloud")],
+)
+def test_own_frame_bag_starts_at_zero_and_maps_onto_the_world(tmp_path, fmt, sensor):
+    kwargs = dict(seed=4, n_frames=40, fmt=fmt, sensor=sensor, camera=Camera(width=32, height=24))
+    world_info = write_scene_bag(bag_path(tmp_path, fmt, "world"), reverse=True, **kwargs)
+    path = bag_path(tmp_path, fmt)
+    info = write_scene_bag(path, reverse=True, own_frame=True, **kwargs)
+    messages, _ = read_bag(path)
+    poses, map_odom, odom_base = planar_poses(messages)
+
+    # A robot's own map frame: its first true pose, with odometry starting there too.
+    for topic in (GROUND_TRUTH_TOPIC, AMCL_POSE_TOPIC, ODOM_TOPIC):
+        assert poses[topic][0] == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    map_in_world = load_map_in_world(info.truth_path)
+    assert map_in_world == info.map_in_world == world_info.trajectory.pose_at(0)
+    assert math.hypot(*map_in_world[:2]) > 1.0  # the reversed drive starts far from the origin
+
+    # The truth file is in the world, as without the option; the transform puts the bag there.
+    plan, trajectory, seen = load_truth(info.truth_path)
+    assert plan == world_info.plan
+    assert seen == world_info.seen_counts
+    np.testing.assert_array_equal(trajectory.x, world_info.trajectory.x)
+    for i, stamp in enumerate(trajectory.stamps):
+        world = trajectory.pose_at(i)
+        assert_in_world(poses[GROUND_TRUTH_TOPIC][i], map_in_world, world)
+        assert_in_world(poses[AMCL_POSE_TOPIC][i], map_in_world, world)
+        ns = stamp_to_ns(stamp)
+        chain = se2(*interpolate_planar(map_odom, ns)) @ se2(*odom_base[ns])
+        chain_pose = (chain[0, 2], chain[1, 2], math.atan2(chain[1, 0], chain[0, 0]))
+        assert_in_world(chain_pose, map_in_world, world)
+
+    # The same drift and the same sensor data as the same drive in the plan's frame.
+    world_messages, _ = read_bag(world_info.path)
+    for pose, world in zip(
+        poses[ODOM_TOPIC], planar_poses(world_messages)[0][ODOM_TOPIC], strict=True
+    ):
+        assert_in_world(pose, map_in_world, world)
+    assert sensor_data(messages) == sensor_data(world_messages)
+    assert len(sensor_data(messages)) == 40
+    assert load_map_in_world(world_info.truth_path) == (0.0, 0.0, 0.0)
+    assert load_map_in_world(SAMPLE_TRUTH) == (0.0, 0.0, 0.0)  # an old file, without the key
+
+
+def test_own_frame_faulty_poses_and_their_tum_file(tmp_path):
+    path = bag_path(tmp_path, "ros1")
+    faults = PoseFaults(latency=0.2, seed=1)
+    info = write_scene_bag(
+        path, seed=4, n_frames=20, fmt="ros1", sensor="laserscan", faults=faults, own_frame=True
+    )
+    messages, _ = read_bag(path)
+    poses, _, _ = planar_poses(messages)
+    tum = read_tum(f"{path}.poses.tum")
+
+    # The faulty source holds the first pose through its latency: the origin of its map.
+    assert tum.pose_at(0) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    sensor_rows = tum.sliced(slice(None, None, 2))
+    np.testing.assert_allclose(
+        np.column_stack([sensor_rows.x, sensor_rows.y, sensor_rows.yaw]),
+        poses[GROUND_TRUTH_TOPIC],
+        atol=1e-6,
+    )
+    late = round(0.2 * 15)  # frames: the source says where the robot was 0.2 s before
+    for i in range(late, len(info.trajectory)):
+        world = info.trajectory.pose_at(i - late)
+        assert_in_world(poses[GROUND_TRUTH_TOPIC][i], info.map_in_world, world)
+
+
+def walls_in_world(walls, map_in_world):
+    """Mapped walls, records of a map reply, moved by ``map_in_world`` into the plan's frame."""
+    move = se2(*map_in_world)
+
+    def moved(point):
+        return (move @ [point[0], point[1], 1.0])[:2].tolist()
+
+    records = []
+    for wall in walls:
+        record = wall.to_map()
+        p0, p1 = moved(record["p0"]), moved(record["p1"])
+        on_line = np.array(moved((record["u"], record["v"])))
+        along = np.subtract(p1, p0) / math.dist(p0, p1)
+        closest = on_line - (on_line @ along) * along  # to the origin, as (u, v) is
+        segments = [[moved(a), moved(b)] for a, b in record["segments"]]
+        record.update(u=closest[0], v=closest[1], p0=p0, p1=p1, segments=segments)
+        records.append(record)
+    return records
+
+
+def test_second_robots_bag_maps_the_plan_once_moved_into_the_world(tmp_path):
+    path = bag_path(tmp_path, "ros1")
+    camera = Camera(width=160, height=120)
+    kwargs = dict(fmt="ros1", sensor="depth16", camera=camera, reverse=True, own_frame=True)
+    info = write_scene_bag(path, seed=5, n_frames=200, **kwargs)
+    walls = offline.walls(offline.run_bag(path).map)
+    plan, _, seen = load_truth(info.truth_path)
+
+    score = evaluate_map(walls_in_world(walls, load_map_in_world(info.truth_path)), plan, seen)
+    assert score.n_mapped >= 5
+    assert score.precision == 1.0
+    assert score.recall >= 0.85
+    assert score.median_angle_deg < 0.5
+    assert score.median_offset_m < 0.02
+    # Not by luck: in the robot's own frame the same walls match nothing of the plan.
+    assert evaluate_map(walls, plan, seen).n_mapped_matched == 0
+
+
+@pytest.mark.parametrize(("flag", "fmt"), [("--reverse", "ros1"), ("--own-frame", "ros2-mcap")])
+def test_scene_command_reverse_and_own_frame_flags(tmp_path, flag, fmt):
+    out = bag_path(tmp_path, fmt)
+    args = ["--seed", "2", "--frames", "5", "--format", fmt, "--sensor", "laserscan", flag]
+    done = run_wallmap("scene", str(out), *args, cwd=tmp_path)
+    truth_path = out.with_name(f"{out.name}.truth.json")
+    plan, trajectory, _ = load_truth(truth_path)
+    messages, _ = read_bag(out)
+    first = planar_poses(messages)[0][GROUND_TRUTH_TOPIC][0]
+    map_in_world = load_map_in_world(truth_path)
+    assert json.loads(truth_path.read_text())["reverse"] == (flag == "--reverse")
+
+    if flag == "--reverse":  # from the route's end, poses in the plan's frame
+        np.testing.assert_allclose(trajectory.positions[0], plan.route[-1], atol=1e-9)
+        assert math.dist(plan.route[-1], plan.route[0]) > 1.0
+        assert map_in_world == (0.0, 0.0, 0.0)
+        assert first == pytest.approx(trajectory.pose_at(0), abs=1e-9)
+        assert "map_in_world" not in done.stdout
+    else:  # from the route's start, poses in a map frame there
+        np.testing.assert_allclose(trajectory.positions[0], plan.route[0], atol=1e-9)
+        assert map_in_world == pytest.approx(trajectory.pose_at(0), abs=1e-12)
+        assert abs(map_in_world[2]) > 0.1  # not the plan's frame: turned at least
+        assert first == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+        assert "map_in_world" in done.stdout

@@ -1,0 +1,144 @@
+"""A fleet of two robots in one building: B's frame found by the walls, the fused map scored.
+
+Part 1, per seed: robot A a depth camera (ROS 2 mcap, 320x240, its map frame the world's), robot
+B a 2-D lidar driving the route the other way, its poses in a frame at its own start
+(``wallmap scene --reverse --own-frame``); each bag mapped offline (``wallmap.offline``, the
+services' code), the two maps handed to the merge service's ``Fleet``. Printed: where B's frame
+was found against where the scene put it, the fused map against the truth (precision, recall,
+duplicates, as ``benchmarks/accuracy.py`` scores a map), and each map alone.
+
+Part 2, the cost: two maps of about 200 walls (ten generated buildings side by side, B's 90 %
+of the walls in a frame of its own, ends 1 cm off): aligning them from nothing, and an update
+(A's map again with five walls seen once more: read, placed, fused, ids given), medians of 5.
+
+    .venv/bin/python benchmarks/fleet.py [--seeds 600,601,602] [--frames 1000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from wallmap.common.map_alignment import Walls, align
+from wallmap.common.map_query import MapQuery
+from wallmap.common.map_records import MapReply, WallRecord
+from wallmap.evaluation import evaluate_map
+from wallmap.offline import run_bag
+from wallmap.scene import Camera, load_truth, write_scene_bag
+from wallmap.scene.bags import load_map_in_world
+from wallmap.scene.floorplan import generate_floorplan
+from wallmap.services.mapper import serving
+from wallmap.services.merge.fleet import Fleet
+
+
+def one_building(seed: int, frames: int, folder: Path) -> str:
+    """A table row: both robots' bags mapped, merged, scored."""
+    bag_a, bag_b = folder / f"a{seed}", folder / f"b{seed}.bag"
+    camera = Camera(width=320, height=240)
+    scene = {"seed": seed, "n_frames": frames}
+    write_scene_bag(bag_a, **scene, fmt="ros2-mcap", sensor="depth16", camera=camera)
+    write_scene_bag(bag_b, **scene, fmt="ros1", sensor="laserscan", reverse=True, own_frame=True)
+    plan, _, seen_a = load_truth(Path(f"{bag_a}.truth.json"))
+    _, _, seen_b = load_truth(Path(f"{bag_b}.truth.json"))
+    replies = {
+        robot: serving.reply(run_bag(bag).map, MapQuery(trajectory=True))
+        for robot, bag in (("A", bag_a), ("B", bag_b))
+    }
+    fleet = Fleet(["A", "B"])
+    for robot, reply in replies.items():
+        fleet.take(robot, reply)
+    fleet.update()
+    found = fleet.robots["B"].alignment
+    truth = np.array(load_map_in_world(Path(f"{bag_b}.truth.json")))
+    seen = {k: seen_a.get(k, 0) + seen_b.get(k, 0) for k in set(seen_a) | set(seen_b)}
+    fused = evaluate_map(fleet.reply(MapQuery()).walls, plan, seen)
+    alone = evaluate_map(replies["A"].walls, plan, seen_a)
+    if found is None:
+        where = "not aligned | | "
+    else:
+        error = found.pose - truth
+        turn = abs(math.degrees(math.remainder(error[2], 2 * math.pi)))
+        where = f"{np.hypot(*error[:2]) * 100:.2f} | {turn:.3f} | {found.runner_up:.2f}"
+    return (
+        f"| {seed} | {len(replies['A'].walls)} / {len(replies['B'].walls)} | {where} | "
+        f"{fused.precision:.3f} | {fused.recall:.3f} | {fused.duplicates} | "
+        f"{alone.recall:.3f} |"
+    )
+
+
+def _records(segments: np.ndarray, first_id: int) -> tuple[WallRecord, ...]:
+    out = []
+    for k, (p, q) in enumerate(segments):
+        d = q - p
+        normal = np.array([-d[1], d[0]]) / np.hypot(*d)
+        u, v = (normal @ p) * normal
+        ends = (float(p[0]), float(p[1])), (float(q[0]), float(q[1]))
+        cov = ((1e-4, 0.0), (0.0, 1e-4))
+        out.append(WallRecord(first_id + k, float(u), float(v), cov, *ends, (ends,), 10))
+    return tuple(out)
+
+
+def cost(rounds: int = 5) -> tuple[int, int, float, float]:
+    """Walls of A and B, and the median seconds of an alignment and of a fusion."""
+    world = np.concatenate(
+        [
+            np.array([[w.p0, w.p1] for w in generate_floorplan(s).walls])
+            + np.array([35.0 * s, 0.0])
+            for s in range(10)
+        ]
+    )
+    rng = np.random.default_rng(0)
+    frame = np.array([12.0, -7.0, 2.2])
+    c, s = math.cos(frame[2]), math.sin(frame[2])
+    keep = rng.random(len(world)) < 0.9
+    mine = (world[keep] - frame[:2]) @ np.array([[c, -s], [s, c]])
+    mine += rng.normal(0.0, 0.01, mine.shape)
+    aligning, fusing = [], []
+    for _ in range(rounds):
+        started = time.perf_counter()
+        align(Walls.of(world), Walls.of(mine))
+        aligning.append(time.perf_counter() - started)
+    fleet = Fleet(["A", "B"])
+    walls = _records(world, 0)
+    fleet.take("A", MapReply(frames=1, walls=walls))
+    fleet.take("B", MapReply(frames=1, walls=_records(mine, 0)))
+    fleet.update()  # aligns
+    for k in range(rounds):  # A's map again, five walls seen once more: an update
+        seen = {*range(5 * k, 5 * k + 5)}
+        walls = tuple(replace(w, n_obs=w.n_obs + 1) if w.id in seen else w for w in walls)
+        fleet.take("A", MapReply(frames=2 + k, walls=walls))
+        started = time.perf_counter()
+        fleet.update()
+        fusing.append(time.perf_counter() - started)
+    return len(world), len(mine), statistics.median(aligning), statistics.median(fusing)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="600,601,602")
+    parser.add_argument("--frames", type=int, default=1000)
+    args = parser.parse_args()
+    print(
+        "| seed | walls A / B | B's frame off (cm) | turned (deg) | runner-up | precision | "
+        "recall | duplicates | recall of A alone |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in (int(s) for s in args.seeds.split(",")):
+            print(one_building(seed, args.frames, Path(tmp)), flush=True)
+    walls_a, walls_b, aligning, fusing = cost()
+    print(
+        f"\ncost: {walls_a} walls and {walls_b} walls aligned in {aligning:.3f} s (target 1 s), "
+        f"fused again in {fusing * 1e3:.1f} ms (target 20 ms), medians of 5"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,192 @@
+"""The merge service: one map of several robots, served under the fleet's prefix.
+
+Each robot runs its own player, detector and mapper under its own prefix, in its own map frame,
+usually behind its own router; routers link (``wallmap router --connect``) and this service,
+anywhere on the mesh, reads each robot's map: one query at start and another whenever that
+robot's ``{robot}/map/updates`` says its map changed (at most once per ``period``). A callback only
+notes which robot spoke; the worker queries, aligns, fuses (``services.merge.fleet``) and
+publishes what changed on ``FLEET/map/updates``. ``FLEET/map/walls`` (the walls' payload, each
+wall with its ``sources``) and ``FLEET/robots`` (where each robot's frame lies) answer from the
+last fusion.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+from typing import Any
+
+import zenoh
+
+from wallmap.common.codec import SCHEMA_VERSION, encode
+from wallmap.common.map_query import MalformedReplyError, MapQuery, QueryError, fetch_map
+from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.transport import (
+    Keys,
+    TransportError,
+    ZenohSettings,
+    key_expression,
+    open_session,
+)
+from wallmap.services.merge.fleet import Fleet
+
+LOG = logging.getLogger("wallmap.merge")
+PERIOD = 1.0  # s: the robots' maps are read at most this often, and at least every 5 periods
+QUERY_TIMEOUT = 2.0
+
+
+def run(settings: ZenohSettings, robots: list[str], stop: threading.Event) -> Stats:
+    """Serve the fleet of ``robots`` (the first one's frame the fleet's) until ``stop``."""
+    for robot in robots:
+        key_expression(robot, "--robots")
+    if settings.prefix in robots:
+        msg = f"--prefix {settings.prefix!r} is one of the robots: the fleet needs its own"
+        raise TransportError(msg)
+    log = setup_logging("merge")
+    keys = Keys(settings.prefix)
+    stats = Stats(log)
+    fleet = Fleet(robots)
+    served = _Served(fleet)
+    spoke: queue.SimpleQueue[str] = queue.SimpleQueue()
+    log.info("connecting to %s (fleet %r of %s)", ", ".join(settings.connect), keys.prefix, robots)
+    with open_session(settings, count=stats.add, stop=stop) as session:
+        listeners = [
+            session.declare_subscriber(Keys(r).map_updates, lambda _s, r=r: spoke.put(r))
+            for r in robots
+        ]
+        updates = session.declare_publisher(keys.map_updates)
+        walls = session.declare_queryable(keys.map_walls, zenoh.handlers.FifoChannel(64))
+        placed = session.declare_queryable(keys.robots, zenoh.handlers.FifoChannel(64))
+        token = Presence(session, keys, "merge", stats, served.details)
+        answering = [
+            threading.Thread(
+                target=_answer_walls, args=(walls.handler, served, stats), daemon=True
+            ),
+            threading.Thread(target=_answer_robots, args=(placed.handler, served), daemon=True),
+        ]
+        for thread in answering:
+            thread.start()
+        log.info("ready: %s -> %s", ", ".join(robots), keys.map_walls)
+        _work(session, fleet, served, spoke, updates, stats, stop)
+        log.info("stopping: %s", stats.snapshot())
+        token.undeclare()
+        for resource in [*listeners, walls, placed]:
+            resource.undeclare()
+        for thread in answering:
+            thread.join(timeout=5.0)
+    return stats
+
+
+class _Served:
+    """The last fusion's replies, encoded once, under a lock the answering threads share."""
+
+    def __init__(self, fleet: Fleet) -> None:
+        self._fleet, self._lock = fleet, threading.Lock()
+        self._robots: dict[str, Any] = fleet.robots_reply()
+
+    def refresh(self) -> None:
+        """After an update: the robots' placements as they now are."""
+        with self._lock:
+            self._robots = self._fleet.robots_reply()
+
+    def walls(self, query: MapQuery, fmt: str) -> bytes:
+        with self._lock:
+            body = self._fleet.reply(query).to_map()
+        return json.dumps({"v": SCHEMA_VERSION, **body}).encode() if fmt == "json" else encode(body)
+
+    def robots(self) -> dict[str, Any]:
+        with self._lock:
+            return self._robots
+
+    def details(self) -> dict[str, Any]:
+        """For ``wallmap status``: robots aligned, walls served, the last update's cost."""
+        robots = self.robots()["robots"]
+        aligned = [r["prefix"] for r in robots if r["aligned"]]
+        return {"robots": len(robots), "aligned": aligned, "walls": len(self._fleet.walls)}
+
+    @property
+    def lock(self) -> threading.Lock:
+        return self._lock
+
+
+def _work(
+    session: zenoh.Session,
+    fleet: Fleet,
+    served: _Served,
+    spoke: queue.SimpleQueue[str],
+    updates: zenoh.Publisher,
+    stats: Stats,
+    stop: threading.Event,
+) -> None:
+    """Read the robots whose maps changed, fuse, publish the changes, until ``stop``."""
+    due = set(fleet.prefixes)  # every robot at start
+    quiet = 0
+    while not stop.wait(PERIOD):
+        while not spoke.empty():
+            due.add(spoke.get_nowait())
+        quiet += 1
+        if quiet >= 5:  # a robot started after us, or an update lost: read every robot now and then
+            due, quiet = set(fleet.prefixes), 0
+        read = [r for r in sorted(due) if _read(session, fleet, r, stats)]
+        due -= set(read)
+        if not read:
+            continue
+        with served.lock:
+            changes = fleet.update()
+        served.refresh()
+        stats.add("fusions")
+        if changes is not None:
+            updates.put(encode(changes.to_map()))
+            stats.add("updates")
+
+
+def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats) -> bool:
+    """A robot's map, into the fleet; False when no mapper of it answered."""
+    try:
+        reply = fetch_map(session, Keys(robot), MapQuery(trajectory=True), timeout=QUERY_TIMEOUT)
+    except MalformedReplyError as err:
+        stats.refuse(f"{robot}'s map", str(err))
+        return True
+    except QueryError as err:
+        stats.note(f"unanswered.{robot}", robot, f"no map from {robot!r} yet: {err}")
+        return False
+    fleet.take(robot, reply)
+    stats.add("maps_read")
+    return True
+
+
+def _answer_walls(
+    channel: zenoh.handlers.Handler[zenoh.Query], served: _Served, stats: Stats
+) -> None:
+    for query in drain(channel):
+        with query:
+            params = dict(query.parameters)
+            try:
+                selection = MapQuery.from_parameters(params)
+            except ValueError as err:
+                query.reply_err(str(err))
+                continue
+            fmt = params.get("format") or "msgpack"
+            if fmt not in ("msgpack", "json"):
+                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+                continue
+            payload = served.walls(selection, fmt)
+            if fmt == "json":
+                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            else:
+                query.reply(query.key_expr, payload)
+        stats.add("queries")
+
+
+def _answer_robots(channel: zenoh.handlers.Handler[zenoh.Query], served: _Served) -> None:
+    for query in drain(channel):
+        with query:
+            fmt = query.parameters.get("format") or "msgpack"
+            body = served.robots()
+            if fmt == "json":
+                payload = json.dumps({"v": SCHEMA_VERSION, **body}).encode()
+                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            else:
+                query.reply(query.key_expr, encode(body))

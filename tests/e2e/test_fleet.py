@@ -1,0 +1,115 @@
+"""A fleet: two robots of one building on two routers, one map from `wallmap merge`.
+
+As the issue's acceptance runs it, smaller: robot A a depth camera (a ROS 2 mcap bag, its map
+frame the world's), robot B a 2-D lidar driving the route the other way with its poses in a
+frame at its own start; A's detector and mapper on router A, B's on router B, router B started
+with ``--connect`` to A; both bags played at 4x at the same time; ``wallmap merge --robots A,B``
+on router A. The fused map is scored against the building's truth and B's frame against where
+the scene put it; every process exits 0 with no traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+from conftest import Stack, free_port, run_wallmap, wait_for_port
+
+from wallmap.common.codec import decode
+from wallmap.evaluation import evaluate_map
+from wallmap.scene import Camera, load_truth, write_scene_bag
+from wallmap.scene.bags import load_map_in_world
+
+pytestmark = pytest.mark.e2e
+FRAMES = 700
+
+
+def _query(endpoint: str, *args: str) -> dict:
+    out = run_wallmap("query", "--json", "--connect", endpoint, *args, "--timeout", "3")
+    return json.loads(out.stdout)
+
+
+def _robots(endpoint: str, prefix: str) -> dict:
+    """``{prefix}/robots``, asked through a session of our own."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(config) as session:
+        for reply in session.get(f"{prefix}/robots", timeout=5.0):
+            return decode(reply.ok.payload.to_bytes())
+    raise AssertionError("no merge service answered")
+
+
+def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
+    bag_a, bag_b = tmp_path / "a", tmp_path / "b.bag"
+    camera = Camera(width=160, height=120)
+    scene = {"seed": 4, "n_frames": FRAMES}
+    written = {
+        "A": write_scene_bag(bag_a, **scene, fmt="ros2-mcap", sensor="depth16", camera=camera),
+        "B": write_scene_bag(
+            bag_b, **scene, fmt="ros1", sensor="laserscan", reverse=True, own_frame=True
+        ),
+    }
+    port_a, port_b = free_port(), free_port()
+    at_a, at_b = f"tcp/127.0.0.1:{port_a}", f"tcp/127.0.0.1:{port_b}"
+    stack = Stack(tmp_path, at_a, "unused")
+    try:
+        stack.start("router-a", "router", "--listen", at_a)
+        wait_for_port(port_a)
+        stack.start("router-b", "router", "--listen", at_b, "--connect", at_a)
+        wait_for_port(port_b)
+        for robot, endpoint in (("A", at_a), ("B", at_b)):
+            for service in ("mapper", "detector"):
+                stack.start(f"{service}-{robot}", service, "--connect", endpoint, "--prefix", robot)
+        merge = stack.start("merge", "merge", "--robots", "A,B", "--prefix", "F", "--connect", at_a)
+        played = {}
+
+        def play(robot: str, bag: Path, endpoint: str) -> None:
+            where = ("--connect", endpoint, "--prefix", robot)
+            played[robot] = run_wallmap("player", str(bag), "--rate", "4", *where, timeout=300)
+
+        players = [
+            threading.Thread(target=play, args=("A", bag_a, at_a)),
+            threading.Thread(target=play, args=("B", bag_b, at_b)),
+        ]
+        for thread in players:
+            thread.start()
+        for thread in players:
+            thread.join()
+        frames = {r: _query(e, "--prefix", r)["frames"] for r, e in (("A", at_a), ("B", at_b))}
+        deadline = time.monotonic() + 20
+        while (fleet := _query(at_a, "--prefix", "F"))["frames"] < sum(frames.values()):
+            assert time.monotonic() < deadline, (fleet["frames"], frames, merge.output())
+            time.sleep(0.5)
+        robots = {r["prefix"]: r for r in _robots(at_b, "F")["robots"]}  # asked through router B
+    finally:
+        stack.stop_all()
+    stack.assert_all_clean()
+
+    plan, _, seen_a = load_truth(Path(f"{bag_a}.truth.json"))
+    _, _, seen_b = load_truth(Path(f"{bag_b}.truth.json"))
+    assert all(played[r].returncode == 0 for r in "AB")
+    assert frames == {r: info.n_frames for r, info in written.items()}, "every frame integrated"
+    assert robots["A"]["aligned"]
+    assert robots["B"]["aligned"], robots
+    truth_b = np.array(load_map_in_world(Path(f"{bag_b}.truth.json")))
+    found_b = np.array([robots["B"][k] for k in ("x", "y", "yaw")])
+    assert np.hypot(*(found_b[:2] - truth_b[:2])) < 0.05
+    assert abs(math.degrees(math.remainder(found_b[2] - truth_b[2], 2 * math.pi))) < 0.5
+    assert robots["B"]["trajectory"], "B's path, in the fleet's frame"
+    seen = {k: seen_a.get(k, 0) + seen_b.get(k, 0) for k in set(seen_a) | set(seen_b)}
+    score = evaluate_map(fleet["walls"], plan, seen)
+    print(f"fleet: {score.summary()}; B at {found_b.round(4)} (truth {truth_b.round(4)})")
+    assert score.precision >= 0.95
+    assert score.recall >= 0.95
+    assert score.duplicates == 0
+    assert all(w["sources"] for w in fleet["walls"])
+    both = [w for w in fleet["walls"] if {s["robot"] for s in w["sources"]} == {"A", "B"}]
+    assert len(both) >= 6, "walls both robots saw are one wall each"

@@ -1,0 +1,99 @@
+"""Fusing robots' walls: placed in the fleet's frame exactly, each physical wall once, ids kept."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wallmap.common import se2
+from wallmap.common.map_fusion import FleetIds, FuseConfig, fuse_walls, place
+from wallmap.common.map_records import WallRecord
+
+
+def _wall(
+    wall_id: int, p: tuple[float, float], q: tuple[float, float], n_obs: int = 10
+) -> WallRecord:
+    a, b = np.array(p, dtype=float), np.array(q, dtype=float)
+    d = b - a
+    normal = np.array([-d[1], d[0]]) / np.hypot(*d)
+    s = (normal @ a) * normal
+    cov = ((4e-4, 1e-5), (1e-5, 2e-4))
+    return WallRecord(wall_id, float(s[0]), float(s[1]), cov, p, q, ((p, q),), n_obs)
+
+
+def _closest_point(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    d = q - p
+    normal = np.array([-d[1], d[0]]) / np.hypot(*d)
+    return (normal @ p) * normal
+
+
+def test_a_placed_wall_is_the_wall_moved_and_its_covariance_the_jacobians_of_it() -> None:
+    wall = _wall(3, (1.0, 2.0), (4.0, 3.5))
+    pose = np.array([2.0, -1.5, 0.7])
+    pose_cov = np.diag([1e-4, 2e-4, 1e-5])
+    moved = place(wall, pose, pose_cov)
+    p, q = se2.transform_points(np.array([wall.p0, wall.p1]), pose)
+    assert np.allclose([moved.p0, moved.p1], [p, q])
+    assert np.allclose([moved.u, moved.v], _closest_point(p, q))
+
+    def closest(s: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """(u, v) of the line of closest point ``s`` after moving by ``frame``, by its points."""
+        d = np.array([-s[1], s[0]])
+        ends = se2.transform_points(np.array([s, s + d]), frame)
+        return _closest_point(*ends)
+
+    s = np.array([wall.u, wall.v])
+    h = 1e-6
+    j_wall = np.column_stack(
+        [(closest(s + e, pose) - closest(s - e, pose)) / (2 * h) for e in h * np.eye(2)]
+    )
+    j_pose = np.column_stack(
+        [(closest(s, pose + e) - closest(s, pose - e)) / (2 * h) for e in h * np.eye(3)]
+    )
+    expected = j_wall @ np.array(wall.cov) @ j_wall.T + j_pose @ pose_cov @ j_pose.T
+    assert np.allclose(moved.cov, expected, rtol=1e-5, atol=1e-12)
+
+
+def test_each_physical_wall_is_fused_once_and_a_robots_own_walls_never() -> None:
+    a = [
+        _wall(1, (0.0, 1.0), (5.0, 1.0)),
+        _wall(2, (6.0, 1.02), (9.0, 1.02)),  # a's wall beyond a door, on the same line
+        _wall(3, (1.0, 1.0), (1.0, 5.0)),
+    ]
+    b = [
+        _wall(7, (3.0, 1.03), (8.0, 1.03)),  # overlaps both of a's: joins one of them only
+        _wall(8, (1.02, 3.5), (1.02, 7.0)),  # overlaps a's wall 3
+        _wall(9, (12.0, 1.0), (14.0, 1.0)),  # on the line, 3 m past a's walls: its own
+    ]
+    fused = fuse_walls([("a", w) for w in a] + [("b", w) for w in b])
+    groups = sorted(sorted(sources) for _, sources in fused)
+    assert [("a", 3), ("b", 8)] in groups
+    assert [("b", 9)] in groups
+    assert len(groups) == 4, "a's two walls on one line stay two"
+    assert all(len({r for r, _ in g}) == len(g) for g in groups), "never two of one robot"
+    wall = next(w for w, sources in fused if ("b", 8) in sources)
+    assert wall.n_obs == 20
+    assert np.allclose([wall.p0, wall.p1], [(1.01, 1.0), (1.01, 7.0)], atol=0.02)
+    assert abs(wall.u - 1.01) < 0.011
+    assert abs(wall.v) < 1e-9
+
+
+def test_a_gap_wider_than_join_gap_keeps_two_walls() -> None:
+    a, b = _wall(1, (0.0, 1.0), (3.0, 1.0)), _wall(2, (3.5, 1.0), (6.0, 1.0))
+    assert len(fuse_walls([("a", a), ("b", b)])) == 1
+    assert len(fuse_walls([("a", a), ("b", b)], FuseConfig(join_gap=0.3))) == 2
+    turned = _wall(3, (0.0, 1.0), (3.0, 1.0 + 3.0 * math.tan(math.radians(5.0))))
+    assert len(fuse_walls([("a", a), ("b", turned)])) == 2, "5 degrees apart: two walls"
+
+
+def test_fleet_ids_stay_and_a_merge_is_reported() -> None:
+    ids = FleetIds()
+    first, merges = ids.assign([(("a", 1),), (("b", 7),), (("a", 2),)])
+    assert first == [0, 1, 2]
+    assert merges == []
+    again, merges = ids.assign([(("a", 2),), (("a", 1), ("b", 7)), (("b", 9),)])
+    assert again[0] == 2, "the same sources, the same id"
+    assert again[1] in (0, 1)
+    assert merges == [(1 - again[1], again[1])], "the other id was merged into it"
+    assert again[2] == 3, "new, and never a reused id"
