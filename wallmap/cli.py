@@ -47,7 +47,14 @@ from wallmap.doctor import add_command as add_doctor_command
 from wallmap.export import write_geojson
 from wallmap.foxglove_cli import add_commands as add_foxglove_commands
 from wallmap.launcher import LaunchError, demo, up, up_live
-from wallmap.map_client import fetch_rooms, format_rooms, format_table, to_json
+from wallmap.map_client import (
+    fetch_robots,
+    fetch_rooms,
+    format_rooms,
+    format_table,
+    robot_paths,
+    to_json,
+)
 from wallmap.options import (
     BAND,
     DETECTOR,
@@ -273,9 +280,18 @@ def _cmd_plot(args: argparse.Namespace, config: Config) -> int:
     from wallmap.plot import write_picture  # noqa: PLC0415 - see _cmd_scene
 
     reply = _fetch(args, config, trajectory="true")
-    write_picture(args.out, reply, size=args.size, rooms=_fetch_rooms(args, config))
+    rooms = _fetch_rooms(args, config)
+    write_picture(args.out, reply, _fleet_paths(args, config, reply), args.size, rooms=rooms)
     print(f"picture: {args.out}")
     return 0
+
+
+def _fleet_paths(args: argparse.Namespace, config: Config, reply: MapReply) -> list[Any] | None:
+    """A fleet's map (its walls have sources): each robot's path in the fleet's frame."""
+    if not any(w.sources for w in reply.walls):
+        return None
+    with open_session(config.zenoh) as session:
+        return robot_paths(fetch_robots(session, Keys(config.zenoh.prefix), timeout=args.timeout))
 
 
 def _cmd_export(args: argparse.Namespace, config: Config) -> int:

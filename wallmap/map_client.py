@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from wallmap.common.codec import SCHEMA_VERSION, MessageError
 from wallmap.common.map_query import ask_mapper
 from wallmap.common.map_records import MapReply
@@ -66,6 +69,31 @@ def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> 
         QueryError: no mapper answered, it refused, or its reply is unreadable.
     """
     return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout)
+
+
+def fetch_robots(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
+    """Ask a fleet's ``{prefix}/robots``: where each robot's frame lies, and its path there.
+
+    Raises:
+        QueryError: no merge service answered, it refused, or its reply is unreadable.
+    """
+    return ask_mapper(session, keys.robots, "robots", _robots_body, timeout)
+
+
+def robot_paths(robots: dict[str, Any]) -> list[NDArray[np.float64]]:
+    """Each aligned robot's path (stamp, x, y, yaw rows) from a fleet's robots reply."""
+    return [
+        np.asarray(r["trajectory"], dtype=float).reshape(-1, 4)
+        for r in robots["robots"]
+        if r.get("trajectory")
+    ]
+
+
+def _robots_body(body: Any) -> dict[str, Any]:
+    """The fleet's robots reply, if it holds a list of robots; MessageError if not."""
+    if not isinstance(body, dict) or not isinstance(body.get("robots"), list):
+        raise MessageError("it has no 'robots' list")
+    return body
 
 
 def _rooms_body(body: Any) -> dict[str, Any]:

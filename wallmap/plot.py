@@ -40,6 +40,8 @@ WALL_COLOUR = "#b3261e"
 BAND_OPACITY = 0.22
 GAP_COLOUR = "#d9908a"
 TRAJECTORY_COLOUR = "#2b6cb0"
+# A fleet's robots, each in its own colour (the first robot's is the one robot's colour).
+TRAJECTORY_COLOURS = (TRAJECTORY_COLOUR, "#c05621", "#6b46c1", "#2c7a7b", "#b83280")
 LABEL_COLOUR = "#202020"
 SCALE_COLOUR = "#000000"
 ROOM_COLOURS = ("#f6c85f", "#9dd866", "#6fb1d8", "#ca472f", "#a27ea8", "#ffa056", "#8dddd0")
@@ -211,6 +213,13 @@ def _wall_geometry(wall: WallRecord) -> _Wall:
     return _Wall(wall.id, pieces, gaps, normal, bands)
 
 
+def _paths(reply: MapReply, trajectory: Array | list[Array] | None) -> list[Array]:
+    """The paths to draw (N, 2): the reply's own, the one given, or each of a list (a fleet)."""
+    if isinstance(trajectory, list):
+        return [_trajectory_xy(reply, path) for path in trajectory]
+    return [_trajectory_xy(reply, trajectory)]
+
+
 def _trajectory_xy(reply: MapReply, trajectory: Array | None) -> Array:
     if trajectory is None:
         rows = reply.trajectory or ()
@@ -233,7 +242,7 @@ def _scale_bar_length(scale: float, width: int) -> float:
 def render_map(
     reply: MapReply,
     *,
-    trajectory: Array | None = None,
+    trajectory: Array | list[Array] | None = None,
     size: int = 1000,
     points: Array | None = None,
     rooms: dict[str, Any] | None = None,
@@ -243,7 +252,8 @@ def render_map(
     Args:
         reply: the map reply (its walls, and its counts for the title).
         trajectory: (N, 2) x, y or (N, 4) stamp, x, y, yaw in the map frame; by default the
-            reply's own ``trajectory``, if it has one.
+            reply's own ``trajectory``, if it has one. A list of them: a fleet's robots' paths,
+            each drawn in its own colour.
         size: pixels of the longer side; line widths and text scale with it.
         points: (N, 2) sensor points in the map frame, drawn grey under the walls (what the
             map should cover), one square per pixel they fall in.
@@ -253,9 +263,9 @@ def render_map(
     walls = [_wall_geometry(w) for w in reply.walls]
     room_list = [] if rooms is None else list(rooms.get("rooms", ()))
     door_list = [] if rooms is None else list(rooms.get("doors", ()))
-    path = _trajectory_xy(reply, trajectory)
+    paths = _paths(reply, trajectory)
     cloud = np.zeros((0, 2)) if points is None else np.asarray(points, dtype=float)
-    content = [path, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
+    content = [*paths, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
     content += [np.asarray(r["polygon"], dtype=float) for r in room_list]
     everything = np.vstack([c.reshape(-1, 2) for c in content])
     if len(everything) == 0:
@@ -286,11 +296,13 @@ def render_map(
         items.extend(Fill(px(b), WALL_COLOUR, BAND_OPACITY, "band") for b in w.bands)
     for w in walls:
         items.extend(Stroke(px(g), max(1.0, 1.2 * unit), GAP_COLOUR, "gap") for g in w.gaps)
-    if len(path) > 1:
-        items.append(Stroke(px(path), max(1.2, 1.5 * unit), TRAJECTORY_COLOUR, "trajectory"))
-    if len(path) > 0:
-        start = px(path[0])
-        items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), TRAJECTORY_COLOUR, "start"))
+    for k, path in enumerate(paths):
+        colour = TRAJECTORY_COLOURS[k % len(TRAJECTORY_COLOURS)]
+        if len(path) > 1:
+            items.append(Stroke(px(path), max(1.2, 1.5 * unit), colour, "trajectory"))
+        if len(path) > 0:
+            start = px(path[0])
+            items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), colour, "start"))
     for w in walls:
         items.extend(Stroke(px(p), max(2.0, 3 * unit), WALL_COLOUR, "wall") for p in w.pieces)
     for door in door_list:
@@ -564,7 +576,7 @@ def encode_png(image: Array) -> bytes:
 def write_png(
     path: Path,
     reply: MapReply,
-    trajectory: Array | None = None,
+    trajectory: Array | list[Array] | None = None,
     size: int = 1000,
     points: Array | None = None,
     rooms: dict[str, Any] | None = None,
@@ -577,7 +589,7 @@ def write_png(
 def write_svg(
     path: Path,
     reply: MapReply,
-    trajectory: Array | None = None,
+    trajectory: Array | list[Array] | None = None,
     size: int = 1000,
     points: Array | None = None,
     rooms: dict[str, Any] | None = None,
@@ -590,7 +602,7 @@ def write_svg(
 def write_picture(
     path: Path,
     reply: MapReply,
-    trajectory: Array | None = None,
+    trajectory: Array | list[Array] | None = None,
     size: int = 1000,
     points: Array | None = None,
     rooms: dict[str, Any] | None = None,

@@ -29,6 +29,7 @@ from wallmap.common.map_fusion import (
 )
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply, MapUpdate, WallRecord
+from wallmap.services.merge.rooms import fleet_rooms
 
 Array = NDArray[np.float64]
 GROWTH = 1.5  # a robot's frame is searched for afresh when its walls have grown this much
@@ -62,6 +63,13 @@ class Fleet:
     robots: dict[str, Robot] = field(init=False)
     ids: FleetIds = field(default_factory=FleetIds)
     walls: dict[int, WallRecord] = field(default_factory=dict)
+    rooms: dict[str, Any] = field(
+        default_factory=lambda: {"frame": "map", "rooms": [], "doors": []}
+    )
+    _room_bodies: dict[str, dict[str, Any]] = field(default_factory=dict, repr=False)
+    _room_ids: tuple[FleetIds, FleetIds] = field(
+        default_factory=lambda: (FleetIds(), FleetIds()), repr=False
+    )
     merges: list[tuple[int, int, float]] = field(default_factory=list)
     seconds: float = 0.0  # the last update's
     # What an update would compute again for walls that did not change: placed walls by
@@ -82,6 +90,10 @@ class Fleet:
         """A robot's newest map."""
         robot = self.robots[prefix]
         robot.reply, robot.fresh = reply, True
+
+    def take_rooms(self, prefix: str, body: dict[str, Any]) -> None:
+        """A robot's newest rooms reply (the contract's payload)."""
+        self._room_bodies[prefix] = body
 
     def update(self) -> MapUpdate | None:
         """Align, fuse and give ids; what changed since the last update (None: nothing)."""
@@ -107,6 +119,9 @@ class Fleet:
         changed = tuple(w for k, w in sorted(walls.items()) if self.walls.get(k) != w)
         removed = tuple(sorted(set(self.walls) - set(walls)))
         self.walls = walls
+        aligned = {p: r.alignment.pose for p, r in self.robots.items() if r.alignment is not None}
+        bodies = {p: b for p, b in self._room_bodies.items() if p in aligned}
+        self.rooms = fleet_rooms(bodies, aligned, self.ids.of_source, self._room_ids)
         self.seconds = time.perf_counter() - started
         if not changed and not removed:
             return None

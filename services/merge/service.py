@@ -5,9 +5,10 @@ usually behind its own router; routers link (``wallmap router --connect``) and t
 anywhere on the mesh, reads each robot's map: one query at start and another whenever that
 robot's ``{robot}/map/updates`` says its map changed (at most once per ``period``). A callback only
 notes which robot spoke; the worker queries, aligns, fuses (``services.merge.fleet``) and
-publishes what changed on ``FLEET/map/updates``. ``FLEET/map/walls`` (the walls' payload, each
-wall with its ``sources``) and ``FLEET/robots`` (where each robot's frame lies) answer from the
-last fusion.
+publishes what changed on ``FLEET/map/updates`` (and ``FLEET/map/rooms/updates``, and as a
+mapper does for RViz, ``FLEET/markers`` and ``FLEET/rooms/markers``). ``FLEET/map/walls`` (the
+walls' payload, each wall with its ``sources``), ``FLEET/map/rooms`` and ``FLEET/robots`` (where
+each robot's frame lies, and its path there) answer from the last fusion.
 """
 
 from __future__ import annotations
@@ -16,12 +17,14 @@ import json
 import logging
 import queue
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import zenoh
 
 from wallmap.common.codec import SCHEMA_VERSION, encode
 from wallmap.common.map_query import MalformedReplyError, MapQuery, QueryError, fetch_map
+from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import (
     Keys,
@@ -30,6 +33,8 @@ from wallmap.common.transport import (
     key_expression,
     open_session,
 )
+from wallmap.map_client import fetch_rooms
+from wallmap.services.mapper.ros2_out import RoomMarkers, Ros2Outlet
 from wallmap.services.merge.fleet import Fleet
 
 LOG = logging.getLogger("wallmap.merge")
@@ -57,22 +62,26 @@ def run(settings: ZenohSettings, robots: list[str], stop: threading.Event) -> St
             for r in robots
         ]
         updates = session.declare_publisher(keys.map_updates)
+        rooms_updates = session.declare_publisher(keys.map_rooms_updates)
         walls = session.declare_queryable(keys.map_walls, zenoh.handlers.FifoChannel(64))
+        rooms = session.declare_queryable(keys.map_rooms, zenoh.handlers.FifoChannel(64))
         placed = session.declare_queryable(keys.robots, zenoh.handlers.FifoChannel(64))
+        ros2 = (Ros2Outlet(session, keys), RoomMarkers(session, keys))  # RViz, as a mapper's
         token = Presence(session, keys, "merge", stats, served.details)
         answering = [
             threading.Thread(
                 target=_answer_walls, args=(walls.handler, served, stats), daemon=True
             ),
-            threading.Thread(target=_answer_robots, args=(placed.handler, served), daemon=True),
+            threading.Thread(target=_answer, args=(placed.handler, served.robots), daemon=True),
+            threading.Thread(target=_answer, args=(rooms.handler, served.rooms), daemon=True),
         ]
         for thread in answering:
             thread.start()
         log.info("ready: %s -> %s", ", ".join(robots), keys.map_walls)
-        _work(session, fleet, served, spoke, updates, stats, stop)
+        _work(session, fleet, served, spoke, (updates, rooms_updates), ros2, stats, stop)
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
-        for resource in [*listeners, walls, placed]:
+        for resource in [*listeners, walls, placed, rooms, *ros2]:
             resource.undeclare()
         for thread in answering:
             thread.join(timeout=5.0)
@@ -85,11 +94,23 @@ class _Served:
     def __init__(self, fleet: Fleet) -> None:
         self._fleet, self._lock = fleet, threading.Lock()
         self._robots: dict[str, Any] = fleet.robots_reply()
+        self._rooms: dict[str, Any] = fleet.rooms
 
-    def refresh(self) -> None:
-        """After an update: the robots' placements as they now are."""
+    def refresh(self) -> bool:
+        """After an update: the robots' placements and rooms as they now are.
+
+        Returns whether the rooms changed (they go out on ``FLEET/map/rooms/updates``).
+        """
         with self._lock:
             self._robots = self._fleet.robots_reply()
+            changed = self._fleet.rooms != self._rooms
+            self._rooms = self._fleet.rooms
+        return changed
+
+    def reply(self) -> MapReply:
+        """The fleet's confirmed walls, for RViz."""
+        with self._lock:
+            return self._fleet.reply(MapQuery())
 
     def walls(self, query: MapQuery, fmt: str) -> bytes:
         with self._lock:
@@ -99,6 +120,10 @@ class _Served:
     def robots(self) -> dict[str, Any]:
         with self._lock:
             return self._robots
+
+    def rooms(self) -> dict[str, Any]:
+        with self._lock:
+            return self._rooms
 
     def details(self) -> dict[str, Any]:
         """For ``wallmap status``: robots aligned, walls served, the last update's cost."""
@@ -116,7 +141,8 @@ def _work(
     fleet: Fleet,
     served: _Served,
     spoke: queue.SimpleQueue[str],
-    updates: zenoh.Publisher,
+    publishers: tuple[zenoh.Publisher, zenoh.Publisher],
+    ros2: tuple[Ros2Outlet, RoomMarkers],
     stats: Stats,
     stop: threading.Event,
 ) -> None:
@@ -135,11 +161,15 @@ def _work(
             continue
         with served.lock:
             changes = fleet.update()
-        served.refresh()
+        rooms_changed = served.refresh()
         stats.add("fusions")
         if changes is not None:
-            updates.put(encode(changes.to_map()))
+            publishers[0].put(encode(changes.to_map()))
+            ros2[0].publish(served.reply())
             stats.add("updates")
+        if rooms_changed:
+            publishers[1].put(encode(served.rooms()))
+            ros2[1].publish(served.rooms())
 
 
 def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats) -> bool:
@@ -154,6 +184,12 @@ def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats) -> boo
         return False
     fleet.take(robot, reply)
     stats.add("maps_read")
+    try:
+        fleet.take_rooms(robot, fetch_rooms(session, Keys(robot), timeout=QUERY_TIMEOUT))
+    except MalformedReplyError as err:
+        stats.refuse(f"{robot}'s rooms", str(err))
+    except QueryError:
+        pass  # a mapper without rooms (an older one): the fleet has its walls
     return True
 
 
@@ -180,13 +216,15 @@ def _answer_walls(
         stats.add("queries")
 
 
-def _answer_robots(channel: zenoh.handlers.Handler[zenoh.Query], served: _Served) -> None:
+def _answer(channel: zenoh.handlers.Handler[zenoh.Query], body: Callable[[], dict]) -> None:
+    """Answer each query with ``body()``, msgpack or (``format=json``) JSON."""
     for query in drain(channel):
         with query:
             fmt = query.parameters.get("format") or "msgpack"
-            body = served.robots()
             if fmt == "json":
-                payload = json.dumps({"v": SCHEMA_VERSION, **body}).encode()
+                payload = json.dumps({"v": SCHEMA_VERSION, **body()}).encode()
                 query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            elif fmt == "msgpack":
+                query.reply(query.key_expr, encode(body()))
             else:
-                query.reply(query.key_expr, encode(body))
+                query.reply_err(f"format must be msgpack or json, got {fmt!r}")

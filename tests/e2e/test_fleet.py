@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import threading
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ from wallmap.common.codec import decode
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import Camera, load_truth, write_scene_bag
 from wallmap.scene.bags import load_map_in_world
+from wallmap.services.mapper import ros2_out
 
 pytestmark = pytest.mark.e2e
 FRAMES = 700
@@ -35,16 +37,16 @@ def _query(endpoint: str, *args: str) -> dict:
     return json.loads(out.stdout)
 
 
-def _robots(endpoint: str, prefix: str) -> dict:
-    """``{prefix}/robots``, asked through a session of our own."""
+def _ask(endpoint: str, key: str) -> bytes:
+    """The first answer to ``key``, asked through a session of our own."""
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(config) as session:
-        for reply in session.get(f"{prefix}/robots", timeout=5.0):
-            return decode(reply.ok.payload.to_bytes())
-    raise AssertionError("no merge service answered")
+        for reply in session.get(key, timeout=5.0):
+            return reply.ok.payload.to_bytes()
+    raise AssertionError(f"nothing answered {key}")
 
 
 def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
@@ -88,7 +90,11 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
         while (fleet := _query(at_a, "--prefix", "F"))["frames"] < sum(frames.values()):
             assert time.monotonic() < deadline, (fleet["frames"], frames, merge.output())
             time.sleep(0.5)
-        robots = {r["prefix"]: r for r in _robots(at_b, "F")["robots"]}  # asked through router B
+        robots = {r["prefix"]: r for r in decode(_ask(at_b, "F/robots"))["robots"]}  # through B
+        markers = ros2_out.decode(_ask(at_a, "F/markers"), "visualization_msgs/msg/MarkerArray")
+        rooms = _query(at_a, "--prefix", "F", "--rooms")
+        picture = tmp_path / "fleet.svg"
+        run_wallmap("plot", str(picture), "--prefix", "F", "--connect", at_a, "--timeout", "3")
     finally:
         stack.stop_all()
     stack.assert_all_clean()
@@ -113,3 +119,11 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
     assert all(w["sources"] for w in fleet["walls"])
     both = [w for w in fleet["walls"] if {s["robot"] for s in w["sources"]} == {"A", "B"}]
     assert len(both) >= 6, "walls both robots saw are one wall each"
+    assert {m.id for m in markers.markers} == {w["id"] for w in fleet["walls"]}, "RViz's walls"
+    assert len(rooms["rooms"]) >= 2, rooms
+    ids = {r["id"] for r in rooms["rooms"]}
+    assert all(set(d["rooms"]) <= ids for d in rooms["doors"])
+    assert all(set(r["walls"]) <= {w["id"] for w in fleet["walls"]} for r in rooms["rooms"])
+    svg = picture.read_text()
+    paths = re.findall(r'<polyline class="trajectory"[^>]*stroke="(#[0-9a-f]{6})"', svg)
+    assert len(set(paths)) == 2, "each robot's path, in its own colour"
