@@ -223,6 +223,10 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
     from wallmap.scene import Camera, PoseFaults, write_scene_bag  # noqa: PLC0415 - see above
     from wallmap.scene.bags import tum_path_for  # noqa: PLC0415 - see above
 
+    truth = args.out.with_name(f"{args.out.name}.truth.json")
+    if args.keep and args.out.exists() and truth.is_file():
+        print(f"kept {args.out}: written before (its ground truth {truth} beside it)")
+        return 0
     if args.out.exists():
         msg = f"{args.out} exists; choose a new path"
         raise FileExistsError(msg)
@@ -401,6 +405,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--height", type=int, default=120, help="image height (px)")
     p.add_argument("--rate", type=positive, default=15.0, help="frames per second")
     p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
+    p.add_argument(
+        "--keep",
+        action="store_true",
+        help="a scene written to OUT before (its ground truth beside it) is kept, not an error: "
+        "a setup step run again",
+    )
     p.add_argument(
         "--reverse",
         action="store_true",

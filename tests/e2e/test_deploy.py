@@ -19,9 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import ROOT, free_port, run_wallmap, wait_for_port
+import zenoh
+from conftest import ROOT, Stack, free_port, run_wallmap, wait_for_port
 from live_robot import mapped, play_to_the_source
 
+from wallmap.common.codec import decode
 from wallmap.evaluation import evaluate_map
 from wallmap.scene import load_truth, write_scene_bag
 
@@ -64,18 +66,58 @@ def compose_commands() -> dict[str, list[str]]:
     return {name: svc["command"] for name, svc in compose["services"].items()}
 
 
+# The fleet profile's services: each robot's (-a, -b) and the merge.
+FLEET = {"merge"} | {
+    f"{service}-{robot}"
+    for service in ("scene", "router", "detector", "mapper", "player")
+    for robot in "ab"
+}
+
+
 def test_compose_and_dockerfile_are_consistent():
-    compose = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
+    text = (ROOT / "docker-compose.yml").read_text()
+    compose = yaml.safe_load(text)
     services = compose["services"]
-    assert set(services) == {"router", "mapper", "detector", "odometry", "ros2", "player"}
+    assert set(services) == {"router", "mapper", "detector", "odometry", "ros2", "player", *FLEET}
     assert services["odometry"]["profiles"] == ["odometry"], "only for bags without poses"
     assert services["ros2"]["profiles"] == ["live"], "only for a live robot"
+    for name in FLEET:
+        assert services[name]["profiles"] == ["fleet"], f"{name}: only for the fleet"
     assert services["router"]["build"] == "."
     for name, svc in services.items():
         assert svc["image"] == "wallmap:latest", name
-        assert svc["command"][0] == name, "each service runs its own subcommand"
+        command = svc["command"][0]
+        assert name in (command, f"{command}-a", f"{command}-b"), "its own subcommand"
     assert set(services["player"]["depends_on"]) == {"router", "mapper", "detector"}
     assert "wallmap-data:/data" in services["mapper"]["volumes"]
+    # Every profile is documented at the top of the file, with how to run it.
+    header = text.split("\nservices:", 1)[0]
+    profiles = {p for svc in services.values() for p in svc.get("profiles", [])}
+    assert profiles == {"odometry", "live", "fleet"}
+    for profile in profiles:
+        assert f"docker-compose --profile {profile} up" in header, profile
+    # The fleet: each robot's services on its own router under its own prefix, the routers
+    # linked, each player after its bag is written, the merge on robot A's router.
+    for robot in "ab":
+        router = f"tcp/router-{robot}:7447"
+        for name in (f"detector-{robot}", f"mapper-{robot}", f"player-{robot}"):
+            command = services[name]["command"]
+            assert command[command.index("--prefix") + 1] == f"robot_{robot}", name
+            assert command[command.index("--connect") + 1] == router, name
+        after = services[f"player-{robot}"]["depends_on"]
+        assert after[f"scene-{robot}"] == {"condition": "service_completed_successfully"}
+        assert {f"router-{robot}", f"detector-{robot}", f"mapper-{robot}"} <= set(after)
+        bag = services[f"player-{robot}"]["command"][1]
+        assert bag == services[f"scene-{robot}"]["command"][1], "it plays the bag written"
+        assert "fleet-bags:/data:ro" in services[f"player-{robot}"]["volumes"]
+        assert "fleet-bags:/data" in services[f"scene-{robot}"]["volumes"]
+    scenes = [services[f"scene-{robot}"]["command"] for robot in "ab"]
+    assert len({c[c.index("--seed") + 1] for c in scenes}) == 1, "one building"
+    assert {"--reverse", "--own-frame"} <= set(scenes[1])
+    assert services["router-b"]["command"][-2:] == ["--connect", "tcp/router-a:7447"]
+    merge = services["merge"]["command"]
+    assert merge[merge.index("--robots") + 1] == "robot_a,robot_b"
+    assert merge[merge.index("--connect") + 1] == "tcp/router-a:7447"
 
     dockerfile = (ROOT / "Dockerfile").read_text()
     assert re.search(r"^FROM python:3\.1[1-9]", dockerfile, re.MULTILINE)
@@ -113,13 +155,24 @@ def interpolate(word: str, env: dict[str, str]) -> str:
 
 
 def localise(
-    command: list[str], endpoint: str, tmp_path: Path, env: dict[str, str] | None = None
+    command: list[str],
+    endpoint: str,
+    tmp_path: Path,
+    env: dict[str, str] | None = None,
+    routers: dict[str, str] | None = None,
 ) -> list[str]:
-    """Compose's container addresses and paths, as they are on this machine."""
+    """Compose's container addresses and paths, as they are on this machine.
+
+    ``endpoint`` stands for the router ``router`` and for what a router listens on; ``routers``
+    maps other routers' service names (the fleet's ``router-a``, ``router-b``) to theirs.
+    """
+    hosts = {"router": endpoint, **(routers or {})}
     out = []
     for word in command:
         arg = interpolate(word, env or {})
-        arg = arg.replace("tcp/router:7447", endpoint).replace("tcp/0.0.0.0:7447", endpoint)
+        for host, local in hosts.items():
+            arg = arg.replace(f"tcp/{host}:7447", local)
+        arg = arg.replace("tcp/0.0.0.0:7447", endpoint)
         if arg.startswith("/data/"):
             arg = str(tmp_path / arg.removeprefix("/data/"))
         elif arg.startswith("/app/"):
@@ -259,3 +312,70 @@ def test_compose_live_profile_maps_a_live_robot(tmp_path):
             if name in procs and procs[name].poll() is None:
                 procs[name].terminate()
                 assert procs[name].wait(timeout=15) == 0, (tmp_path / f"{name}.log").read_text()
+
+
+def fleet_robots(endpoint: str) -> dict[str, dict]:
+    """``fleet/robots`` (where each robot's map frame lies), asked through a session of our own."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(config) as session:
+        for reply in session.get("fleet/robots", timeout=5.0):
+            return {r["prefix"]: r for r in decode(reply.ok.payload.to_bytes())["robots"]}
+    raise AssertionError("no merge service answered fleet/robots")
+
+
+def test_compose_fleet_profile_merges_two_robots(tmp_path: Path) -> None:
+    """`docker-compose --profile fleet up`: the two bags written, each robot's player, detector
+    and mapper on its own router (router-b joined to router-a), and the merge's one map."""
+    at_a, at_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    routers = {"router-a": at_a, "router-b": at_b}
+    commands = {
+        name: localise(command, at_b if name == "router-b" else at_a, tmp_path, routers=routers)
+        for name, command in compose_commands().items()
+        if name in FLEET
+    }
+    stack = Stack(tmp_path, at_a, "fleet")  # stack.query(): the fleet's map, on router-a
+    robots = {"robot_a": "a", "robot_b": "b"}  # each robot's prefix, its services' suffix
+    try:
+        scenes = [stack.start(name, *commands[name]) for name in ("scene-a", "scene-b")]
+        for name in ("router-a", "router-b"):
+            stack.start(name, *commands[name])
+            wait_for_port(int(routers[name].rsplit(":", 1)[1]))
+        for name in ("detector-a", "mapper-a", "detector-b", "mapper-b", "merge"):
+            stack.start(name, *commands[name])
+        for scene in scenes:  # the players wait for their bags: service_completed_successfully
+            assert scene.proc.wait(timeout=60) == 0, scene.output()
+        players = {
+            robot: stack.start(f"player-{x}", *commands[f"player-{x}"])
+            for robot, x in robots.items()
+        }
+        published = {}
+        for robot, player in players.items():
+            assert player.proc.wait(timeout=120) == 0, player.output()
+            found = re.search(r"published (\d+) frames", player.output())
+            assert found, player.output()
+            published[robot] = int(found[1])
+        mapped = {
+            robot: stack.run(
+                "query", "--json", "--prefix", robot, "--connect", routers[f"router-{x}"]
+            )
+            for robot, x in robots.items()
+        }
+        frames = {robot: json.loads(out.stdout)["frames"] for robot, out in mapped.items()}
+        assert frames == published, "every frame of both bags in its robot's map"
+        deadline = time.monotonic() + 20  # the merge reads each robot's map at least every 5 s
+        while (fleet := stack.query())["frames"] < sum(frames.values()):
+            assert time.monotonic() < deadline, (fleet["frames"], frames)
+            time.sleep(0.5)
+        placed = fleet_robots(at_b)  # asked through router-b: the routers are one mesh
+    finally:
+        stack.stop_all()
+    stack.assert_all_clean()
+    assert placed["robot_a"]["aligned"], placed
+    assert placed["robot_b"]["aligned"], placed  # B's map frame found in A's, by the walls
+    sources = [{s["robot"] for s in wall["sources"]} for wall in fleet["walls"]]
+    assert all(sources), "every fused wall says which robots saw it"
+    assert set().union(*sources) == {"robot_a", "robot_b"}
+    assert sum(seen == {"robot_a", "robot_b"} for seen in sources) >= 6, "walls both saw, once"

@@ -46,6 +46,7 @@ MADE = {
     "README.md": (["map.json", "map.png", "map.geojson"], r"published \d+ frames"),
     "configuration.md": (["run.toml", "map.json"], r"\d+ walls"),
     "doctor.md": ([], r"verdict\s+ready"),
+    "fleet.md": (["fleet.png"], r"\d+ walls from \d+ frames"),
     "rooms.md": (["rooms.json", "map.png", "map.geojson"], r"\d+ rooms?, \d+ doors?"),
     "view.md": ([], r"wallmap view: http://127\.0\.0\.1:8766/"),
 }

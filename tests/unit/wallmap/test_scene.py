@@ -1110,3 +1110,20 @@ def test_scene_command_reverse_and_own_frame_flags(tmp_path, flag, fmt):
         assert abs(map_in_world[2]) > 0.1  # not the plan's frame: turned at least
         assert first == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
         assert "map_in_world" in done.stdout
+
+
+def test_scene_command_keep_leaves_a_written_scene_and_only_that(tmp_path):
+    """``--keep``: a setup step run again (docker-compose's fleet) keeps the bag it wrote; a path
+    holding anything else is still refused."""
+    out = tmp_path / "kept.bag"
+    run_wallmap("scene", str(out), "--frames", "5", "--sensor", "laserscan", cwd=tmp_path)
+    before = out.read_bytes()
+    again = run_wallmap("scene", str(out), "--frames", "9", "--keep", cwd=tmp_path)
+    assert again.stdout.startswith(f"kept {out}: written before")
+    assert out.read_bytes() == before
+    refused = run_wallmap("scene", str(out), "--frames", "5", cwd=tmp_path, expect=1)
+    assert "exists; choose a new path" in refused.stderr
+    other = tmp_path / "other.bag"
+    other.write_bytes(b"not a scene")
+    refused = run_wallmap("scene", str(other), "--keep", cwd=tmp_path, expect=1)
+    assert "exists; choose a new path" in refused.stderr
