@@ -137,3 +137,21 @@ def ask_mapper(
             raise MalformedReplyError(msg) from err
     msg = f"no mapper answered on {selector.split('?', maxsplit=1)[0]} within {timeout:.0f} s"
     raise QueryError(msg)
+
+
+def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
+    """Ask ``{prefix}/map/rooms``; the contract's payload, checked for its two lists.
+
+    Raises:
+        QueryError: no mapper answered, it refused, or its reply is unreadable.
+    """
+    return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout)
+
+
+def _rooms_body(body: Any) -> dict[str, Any]:
+    """The rooms reply, if it holds the contract's two lists; MessageError if not."""
+    if not isinstance(body, dict) or not all(
+        isinstance(body.get(k), list) for k in ("rooms", "doors")
+    ):
+        raise MessageError("it has no 'rooms' and 'doors' lists")
+    return body

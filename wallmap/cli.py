@@ -29,7 +29,7 @@ from wallmap.arg_types import (
     robot_prefixes,
 )
 from wallmap.common.delivery import StalledError
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
 from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.tf_buffer import TfError
@@ -49,7 +49,6 @@ from wallmap.foxglove_cli import add_commands as add_foxglove_commands
 from wallmap.launcher import LaunchError, demo, up, up_live
 from wallmap.map_client import (
     fetch_robots,
-    fetch_rooms,
     format_rooms,
     format_table,
     robot_paths,

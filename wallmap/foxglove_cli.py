@@ -26,13 +26,12 @@ import zenoh
 from wallmap import __version__
 from wallmap.arg_types import port, positive
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
 from wallmap.common.map_records import MapUpdate
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import Keys, open_session
 from wallmap.config import Config, to_toml
-from wallmap.map_client import fetch_rooms
 from wallmap.options import ZENOH, add_command
 
 EXTRA_MISSING = "the foxglove extra is not installed: pip install 'wallmap[foxglove]'"

@@ -23,7 +23,7 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
 from wallmap.common.runtime import stop_on_signals
 from wallmap.common.transport import (
     Keys,
@@ -33,7 +33,7 @@ from wallmap.common.transport import (
     open_session,
 )
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
-from wallmap.map_client import fetch_rooms, format_table, to_json
+from wallmap.map_client import format_table, to_json
 from wallmap.services.player.service import PlayerSettings
 
 if TYPE_CHECKING:

@@ -62,15 +62,6 @@ def to_json(reply: MapReply, **extra: Any) -> str:
     return json.dumps({"v": SCHEMA_VERSION, **reply.to_map(), **extra}, indent=1)
 
 
-def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
-    """Ask ``{prefix}/map/rooms``; the contract's payload, checked for its two lists.
-
-    Raises:
-        QueryError: no mapper answered, it refused, or its reply is unreadable.
-    """
-    return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout)
-
-
 def fetch_robots(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
     """Ask a fleet's ``{prefix}/robots``: where each robot's frame lies, and its path there.
 
@@ -93,15 +84,6 @@ def _robots_body(body: Any) -> dict[str, Any]:
     """The fleet's robots reply, if it holds a list of robots; MessageError if not."""
     if not isinstance(body, dict) or not isinstance(body.get("robots"), list):
         raise MessageError("it has no 'robots' list")
-    return body
-
-
-def _rooms_body(body: Any) -> dict[str, Any]:
-    """The rooms reply, if it holds the contract's two lists; MessageError if not."""
-    if not isinstance(body, dict) or not all(
-        isinstance(body.get(k), list) for k in ("rooms", "doors")
-    ):
-        raise MessageError("it has no 'rooms' and 'doors' lists")
     return body
 
 

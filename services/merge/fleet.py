@@ -87,9 +87,20 @@ class Fleet:
         first.alignment = Alignment(np.zeros(3), np.zeros((3, 3)), 0, 0.0, 0.0)
 
     def take(self, prefix: str, reply: MapReply) -> None:
-        """A robot's newest map."""
+        """A robot's newest map.
+
+        One with fewer frames than the last is a new map (its mapper restarted without its state
+        file, in a new frame): where its frame lay is searched for afresh.
+        """
         robot = self.robots[prefix]
+        if robot.reply is not None and reply.frames < robot.reply.frames:
+            self._lost(robot)
         robot.reply, robot.fresh = reply, True
+
+    def _lost(self, robot: Robot) -> None:
+        """A robot's frame no longer known (not the first's: that one is the fleet's)."""
+        if robot.prefix != self.prefixes[0]:
+            robot.alignment, robot.searched_at = None, 0
 
     def take_rooms(self, prefix: str, body: dict[str, Any]) -> None:
         """A robot's newest rooms reply (the contract's payload)."""
@@ -171,6 +182,8 @@ class Fleet:
             )
             if matched >= self.align_config.min_matched:
                 robot.alignment = Alignment(pose, cov, matched, overlap, robot.alignment.runner_up)
+            else:  # its map no longer lies where it did (the first robot's moved): search again
+                self._lost(robot)
 
     @property
     def frames(self) -> int:

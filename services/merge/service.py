@@ -23,7 +23,13 @@ from typing import Any
 import zenoh
 
 from wallmap.common.codec import SCHEMA_VERSION, encode
-from wallmap.common.map_query import MalformedReplyError, MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import (
+    MalformedReplyError,
+    MapQuery,
+    QueryError,
+    fetch_map,
+    fetch_rooms,
+)
 from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import (
@@ -33,7 +39,6 @@ from wallmap.common.transport import (
     key_expression,
     open_session,
 )
-from wallmap.map_client import fetch_rooms
 from wallmap.services.mapper.ros2_out import RoomMarkers, Ros2Outlet
 from wallmap.services.merge.fleet import Fleet
 

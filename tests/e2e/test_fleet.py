@@ -37,6 +37,20 @@ def _query(endpoint: str, *args: str) -> dict:
     return json.loads(out.stdout)
 
 
+def _settled(endpoint: str, frames: int) -> dict | None:
+    """The fleet's map once it holds every frame of both robots (None: not yet, or no answer)."""
+    out = run_wallmap("query", "--json", "--connect", endpoint, "--prefix", "F", expect=None)
+    if out.returncode:
+        return None
+    reply = json.loads(out.stdout)
+    return reply if reply["frames"] >= frames and reply["walls"] else None
+
+
+def _sources(reply: dict) -> list[list[tuple[str, int]]]:
+    """Each fused wall as the sorted robots' walls it holds."""
+    return sorted(sorted((s["robot"], s["id"]) for s in w["sources"]) for w in reply["walls"])
+
+
 def _ask(endpoint: str, key: str) -> bytes:
     """The first answer to ``key``, asked through a session of our own."""
     config = zenoh.Config()
@@ -95,6 +109,12 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
         rooms = _query(at_a, "--prefix", "F", "--rooms")
         picture = tmp_path / "fleet.svg"
         run_wallmap("plot", str(picture), "--prefix", "F", "--connect", at_a, "--timeout", "3")
+        merge.stop()  # a merge service restarted rebuilds the fleet's map from the robots' maps
+        stack.start("merge-again", "merge", "--robots", "A,B", "--prefix", "F", "--connect", at_a)
+        deadline = time.monotonic() + 30
+        while (rebuilt := _settled(at_a, sum(frames.values()))) is None:
+            assert time.monotonic() < deadline, "the restarted merge service rebuilt no map"
+            time.sleep(0.5)
     finally:
         stack.stop_all()
     stack.assert_all_clean()
@@ -117,6 +137,7 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
     assert score.recall >= 0.95
     assert score.duplicates == 0
     assert all(w["sources"] for w in fleet["walls"])
+    assert _sources(rebuilt) == _sources(fleet), "the same walls from the same robots' walls"
     both = [w for w in fleet["walls"] if {s["robot"] for s in w["sources"]} == {"A", "B"}]
     assert len(both) >= 6, "walls both robots saw are one wall each"
     assert {m.id for m in markers.markers} == {w["id"] for w in fleet["walls"]}, "RViz's walls"

@@ -28,7 +28,13 @@ from urllib.parse import parse_qs, urlsplit
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import MalformedReplyError, MapQuery, QueryError, fetch_map
+from wallmap.common.map_query import (
+    MalformedReplyError,
+    MapQuery,
+    QueryError,
+    fetch_map,
+    fetch_rooms,
+)
 from wallmap.common.map_records import MapReply, MapUpdate
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
@@ -37,7 +43,6 @@ from wallmap.common.transport import (
     open_session,
 )
 from wallmap.config import Config
-from wallmap.map_client import fetch_rooms
 from wallmap.options import VIEW, ZENOH
 from wallmap.options import add_command as add_options_command
 from wallmap.view.live import LiveMap

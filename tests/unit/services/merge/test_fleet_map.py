@@ -79,3 +79,27 @@ def test_the_fleets_reply_is_the_contracts_with_sources_and_selects_as_a_map_que
     assert fleet.reply(MapQuery(min_obs=11)).walls == ()
     box = fleet.reply(MapQuery(bbox=(-100.0, -100.0, -99.0, -99.0)))
     assert box.walls == (), "no wall crosses a box far away"
+
+
+def test_a_robot_whose_map_starts_again_is_placed_again() -> None:
+    """B's mapper restarted without its state file, switched on elsewhere: fewer frames, a new
+    frame. Where it lies is searched for afresh, and its old walls leave the fleet's map."""
+    world, seen_by_b = _maps()
+    fleet = Fleet(["A", "B"])
+    fleet.take("A", MapReply(frames=10, walls=_records(world, 0)))
+    fleet.take("B", MapReply(frames=50, walls=_records(seen_by_b, 0)))
+    fleet.update()
+    moved = np.array([-2.0, 5.0, -0.4])
+    c, s = math.cos(moved[2]), math.sin(moved[2])
+    again = (world - moved[:2]) @ np.array([[c, -s], [s, c]])
+    fleet.take("B", MapReply(frames=3, walls=_records(again[:2], 0)))  # a new map, two walls yet
+    fleet.update()
+    robots = {r["prefix"]: r for r in fleet.robots_reply()["robots"]}
+    assert not robots["B"]["aligned"]
+    assert all(w.sources == (("A", w.sources[0][1]),) for w in fleet.walls.values())
+    fleet.take("B", MapReply(frames=9, walls=_records(again, 0)))
+    fleet.update()
+    found = fleet.robots["B"].alignment
+    assert found is not None
+    assert np.allclose(found.pose, moved, atol=1e-6)
+    assert len(fleet.walls) == len(world), "no wall twice"
