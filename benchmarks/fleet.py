@@ -1,9 +1,10 @@
 """A fleet of two robots in one building: B's frame found by the walls, the fused map scored.
 
-Part 1, per seed: robot A a depth camera (ROS 2 mcap, 320x240, its map frame the world's), robot
-B a 2-D lidar driving the route the other way, its poses in a frame at its own start
-(``wallmap scene --reverse --own-frame``); each bag mapped offline (``wallmap.offline``, the
-services' code), the two maps handed to the merge service's ``Fleet``. Printed: where B's frame
+Part 1, per scene kind (``benchmarks/accuracy.py``'s) and seed: robot A a depth camera (ROS 2
+mcap, the kind's camera; its map frame the world's), robot B a 2-D lidar driving the route the
+other way, its poses in a frame at its own start (``wallmap scene --reverse --own-frame``); each
+bag mapped offline (``wallmap.offline``, the services' code), the two maps handed to the merge
+service's ``Fleet``. Printed: where B's frame
 was found against where the scene put it, the fused map against the truth (precision, recall,
 duplicates, as ``benchmarks/accuracy.py`` scores a map), and each map alone.
 
@@ -11,7 +12,8 @@ Part 2, the cost: two maps of about 200 walls (ten generated buildings side by s
 of the walls in a frame of its own, ends 1 cm off): aligning them from nothing, and an update
 (A's map again with five walls seen once more: read, placed, fused, ids given), medians of 5.
 
-    .venv/bin/python benchmarks/fleet.py [--seeds 600,601,602] [--frames 1000]
+    .venv/bin/python benchmarks/fleet.py [--kinds non-manhattan,corridor] [--seeds 600,601,602]
+        [--frames 1000]
 """
 
 from __future__ import annotations
@@ -31,19 +33,20 @@ from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply, WallRecord
 from wallmap.evaluation import evaluate_map
 from wallmap.offline import run_bag
-from wallmap.scene import Camera, load_truth, write_scene_bag
+from wallmap.scene import load_truth, write_scene_bag
 from wallmap.scene.bags import load_map_in_world
 from wallmap.scene.floorplan import generate_floorplan
+from wallmap.scene.kinds import SCENE_KINDS
 from wallmap.services.mapper import serving
 from wallmap.services.merge.fleet import Fleet
 
 
-def one_building(seed: int, frames: int, folder: Path) -> str:
-    """A table row: both robots' bags mapped, merged, scored."""
-    bag_a, bag_b = folder / f"a{seed}", folder / f"b{seed}.bag"
-    camera = Camera(width=320, height=240)
-    scene = {"seed": seed, "n_frames": frames}
-    write_scene_bag(bag_a, **scene, fmt="ros2-mcap", sensor="depth16", camera=camera)
+def one_building(kind: str, seed: int, frames: int, folder: Path) -> str:
+    """A table row: both robots' bags of one building of a scene kind mapped, merged, scored."""
+    bag_a, bag_b = folder / f"{kind}-a{seed}", folder / f"{kind}-b{seed}.bag"
+    recipe = SCENE_KINDS[kind]
+    scene = {"seed": seed, "n_frames": frames, "plan": recipe.plan(seed)}
+    write_scene_bag(bag_a, **scene, fmt="ros2-mcap", sensor="depth16", camera=recipe.camera)
     write_scene_bag(bag_b, **scene, fmt="ros1", sensor="laserscan", reverse=True, own_frame=True)
     plan, _, seen_a = load_truth(Path(f"{bag_a}.truth.json"))
     _, _, seen_b = load_truth(Path(f"{bag_b}.truth.json"))
@@ -67,7 +70,7 @@ def one_building(seed: int, frames: int, folder: Path) -> str:
         turn = abs(math.degrees(math.remainder(error[2], 2 * math.pi)))
         where = f"{np.hypot(*error[:2]) * 100:.2f} | {turn:.3f} | {found.runner_up:.2f}"
     return (
-        f"| {seed} | {len(replies['A'].walls)} / {len(replies['B'].walls)} | {where} | "
+        f"| {kind} | {seed} | {len(replies['A'].walls)} / {len(replies['B'].walls)} | {where} | "
         f"{fused.precision:.3f} | {fused.recall:.3f} | {fused.duplicates} | "
         f"{alone.recall:.3f} |"
     )
@@ -123,16 +126,18 @@ def cost(rounds: int = 5) -> tuple[int, int, float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="600,601,602")
+    parser.add_argument("--kinds", default="non-manhattan", help="scene kinds, comma-separated")
     parser.add_argument("--frames", type=int, default=1000)
     args = parser.parse_args()
     print(
-        "| seed | walls A / B | B's frame off (cm) | turned (deg) | runner-up | precision | "
-        "recall | duplicates | recall of A alone |"
+        "| scene | seed | walls A / B | B's frame off (cm) | turned (deg) | runner-up | "
+        "precision | recall | duplicates | recall of A alone |"
     )
-    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in (int(s) for s in args.seeds.split(",")):
-            print(one_building(seed, args.frames, Path(tmp)), flush=True)
+        for kind in args.kinds.split(","):
+            for seed in (int(s) for s in args.seeds.split(",")):
+                print(one_building(kind, seed, args.frames, Path(tmp)), flush=True)
     walls_a, walls_b, aligning, fusing = cost()
     print(
         f"\ncost: {walls_a} walls and {walls_b} walls aligned in {aligning:.3f} s (target 1 s), "

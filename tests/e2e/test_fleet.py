@@ -15,6 +15,7 @@ import math
 import re
 import threading
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,16 @@ def _sources(reply: dict) -> list[list[tuple[str, int]]]:
     return sorted(sorted((s["robot"], s["id"]) for s in w["sources"]) for w in reply["walls"])
 
 
+def _page(port: int) -> dict:
+    """What the live page shows: ``/api/map`` of ``wallmap view``."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/map?since=0", timeout=5) as answer:
+        return json.loads(answer.read())
+
+
+def _ids(body: dict) -> set[int]:
+    return {w["id"] for w in body.get("walls", ())}
+
+
 def _ask(endpoint: str, key: str) -> bytes:
     """The first answer to ``key``, asked through a session of our own."""
     config = zenoh.Config()
@@ -85,6 +96,9 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
             for service in ("mapper", "detector"):
                 stack.start(f"{service}-{robot}", service, "--connect", endpoint, "--prefix", robot)
         merge = stack.start("merge", "merge", "--robots", "A,B", "--prefix", "F", "--connect", at_a)
+        page = free_port()
+        stack.start("view", "view", "--port", str(page), "--prefix", "F", "--connect", at_a)
+        wait_for_port(page)
         played = {}
 
         def play(robot: str, bag: Path, endpoint: str) -> None:
@@ -107,6 +121,11 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
         robots = {r["prefix"]: r for r in decode(_ask(at_b, "F/robots"))["robots"]}  # through B
         markers = ros2_out.decode(_ask(at_a, "F/markers"), "visualization_msgs/msg/MarkerArray")
         rooms = _query(at_a, "--prefix", "F", "--rooms")
+        deadline = time.monotonic() + 15  # the live page follows the fleet's updates
+        served = {w["id"] for w in fleet["walls"]}
+        while _ids(shown := _page(page)) != served:
+            assert time.monotonic() < deadline, (shown, fleet)
+            time.sleep(0.5)
         picture = tmp_path / "fleet.svg"
         run_wallmap("plot", str(picture), "--prefix", "F", "--connect", at_a, "--timeout", "3")
         merge.stop()  # a merge service restarted rebuilds the fleet's map from the robots' maps
@@ -142,6 +161,7 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
     assert len(both) >= 6, "walls both robots saw are one wall each"
     assert {m.id for m in markers.markers} == {w["id"] for w in fleet["walls"]}, "RViz's walls"
     assert len(rooms["rooms"]) >= 2, rooms
+    assert len(shown["rooms"]["rooms"]) == len(rooms["rooms"]), "the page's rooms are the fleet's"
     ids = {r["id"] for r in rooms["rooms"]}
     assert all(set(d["rooms"]) <= ids for d in rooms["doors"])
     assert all(set(r["walls"]) <= {w["id"] for w in fleet["walls"]} for r in rooms["rooms"])
