@@ -5,8 +5,9 @@ fleet's (the first robot's). Here each robot's walls are moved there (``place``:
 measurement model seen from the fleet's origin, its covariance through both Jacobians, the
 frame's uncertainty included), then walls of different robots that are one physical wall are
 fused (``fuse_walls``): on one line (``parallel``, ``offset``) and overlapping or with a gap of at
-most ``join_gap`` along it. Two walls of one robot are never fused: its mapper kept them apart
-for a reason (a door between them, two faces of a thin wall). A fused wall's line combines its
+most ``join_gap`` along it. Two walls of one robot are fused only as pieces of one line, apart
+along it, that another robot saw as one wall; never two that overlap (two faces of a thin wall).
+A fused wall's line combines its
 members in information form (``ekf.fuse``), its segments are theirs projected onto it and joined.
 
 Fleet ids stay while the maps grow (``FleetIds``): a fused wall takes the id most of its
@@ -32,6 +33,7 @@ Source = tuple[str, int]  # (robot prefix, the wall's id in that robot's map)
 # A line this near (m) the fleet's origin has no closest point to fuse by (the first robot stood
 # there, so none is); its best-seen member's line is kept.
 NEAR_ORIGIN = 0.05
+PIECES_OVERLAP = 0.05  # m two walls of one robot may overlap along their line and still be pieces
 
 
 @dataclass(frozen=True)
@@ -92,7 +94,11 @@ def fuse_walls(
 
 
 def group_walls(walls: Sequence[tuple[str, WallRecord]], config: FuseConfig) -> list[list[int]]:
-    """Indices of the walls that are one, best pairs first, never two of one robot."""
+    """Indices of the walls that are one, best pairs first.
+
+    Two walls of one robot are one only as pieces of one line apart along it, joined by another
+    robot's wall: never two that overlap (two faces of a thin wall, a wall and its shadow).
+    """
     n = len(walls)
     if not n:
         return []
@@ -118,9 +124,19 @@ def group_walls(walls: Sequence[tuple[str, WallRecord]], config: FuseConfig) -> 
     order = np.argsort(np.maximum(off[j, i], off[i, j]), kind="stable")
     owner = list(range(n))
     members = {k: [k] for k in range(n)}
+    # Two walls of one robot in one group only as pieces of one line, apart along it (a wall the
+    # other robot saw whole, across the gap its mapper left open); never overlapping walls.
+    apart = (np.minimum(high, length[None, :]) - np.maximum(low, 0.0) < PIECES_OVERLAP) & (
+        off <= 2 * config.offset
+    )
     for p, q in zip(i[order].tolist(), j[order].tolist(), strict=True):
         gp, gq = _root(owner, p), _root(owner, q)
-        if gp == gq or {walls[k][0] for k in members[gp]} & {walls[k][0] for k in members[gq]}:
+        if gp == gq or not all(
+            apart[x, y] and apart[y, x]
+            for x in members[gp]
+            for y in members[gq]
+            if robot[x] == robot[y]
+        ):
             continue
         owner[gq] = gp
         members[gp] += members.pop(gq)

@@ -55,28 +55,35 @@ def test_a_placed_wall_is_the_wall_moved_and_its_covariance_the_jacobians_of_it(
     assert np.allclose(moved.cov, expected, rtol=1e-5, atol=1e-12)
 
 
-def test_each_physical_wall_is_fused_once_and_a_robots_own_walls_never() -> None:
+def test_each_physical_wall_is_fused_once_and_a_robots_overlapping_walls_never() -> None:
     a = [
         _wall(1, (0.0, 1.0), (5.0, 1.0)),
-        _wall(2, (6.0, 1.02), (9.0, 1.02)),  # a's wall beyond a door, on the same line
+        _wall(2, (6.0, 1.02), (9.0, 1.02)),  # a's wall beyond a gap, on the same line
         _wall(3, (1.0, 1.0), (1.0, 5.0)),
+        _wall(4, (2.0, 8.0), (6.0, 8.0)),  # the two faces of a thin wall, both seen by a
+        _wall(5, (2.0, 8.1), (6.0, 8.1)),
     ]
     b = [
-        _wall(7, (3.0, 1.03), (8.0, 1.03)),  # overlaps both of a's: joins one of them only
+        _wall(7, (3.0, 1.03), (8.0, 1.03)),  # across a's gap: a's two pieces are one wall
         _wall(8, (1.02, 3.5), (1.02, 7.0)),  # overlaps a's wall 3
         _wall(9, (12.0, 1.0), (14.0, 1.0)),  # on the line, 3 m past a's walls: its own
+        _wall(10, (2.0, 8.05), (6.0, 8.05)),  # between the faces: joins one of them only
     ]
     fused = fuse_walls([("a", w) for w in a] + [("b", w) for w in b])
     groups = sorted(sorted(sources) for _, sources in fused)
+    assert [("a", 1), ("a", 2), ("b", 7)] in groups
     assert [("a", 3), ("b", 8)] in groups
     assert [("b", 9)] in groups
-    assert len(groups) == 4, "a's two walls on one line stay two"
-    assert all(len({r for r, _ in g}) == len(g) for g in groups), "never two of one robot"
+    faces = [g for g in groups if {("a", 4), ("a", 5)} & set(g)]
+    assert len(faces) == 2, "a's overlapping walls stay two"
+    assert sorted(len(g) for g in faces) == [1, 2]
     wall = next(w for w, sources in fused if ("b", 8) in sources)
     assert wall.n_obs == 20
     assert np.allclose([wall.p0, wall.p1], [(1.01, 1.0), (1.01, 7.0)], atol=0.02)
     assert abs(wall.u - 1.01) < 0.011
     assert abs(wall.v) < 1e-9
+    pieces = next(w for w, sources in fused if ("b", 7) in sources)
+    assert len(pieces.segments) == 1, "a's gap is covered by b's wall: one stretch"
 
 
 def test_a_gap_wider_than_join_gap_keeps_two_walls() -> None:
