@@ -153,14 +153,14 @@ def _work(
 ) -> None:
     """Read the robots whose maps changed, fuse, publish the changes, until ``stop``."""
     due = set(fleet.prefixes)  # every robot at start
-    quiet = 0
+    quiet, silent = 0, set[str]()
     while not stop.wait(PERIOD):
         while not spoke.empty():
             due.add(spoke.get_nowait())
         quiet += 1
         if quiet >= 5:  # a robot started after us, or an update lost: read every robot now and then
             due, quiet = set(fleet.prefixes), 0
-        read = [r for r in sorted(due) if _read(session, fleet, r, stats)]
+        read = [r for r in sorted(due) if _read(session, fleet, r, stats, silent)]
         due -= set(read)
         if not read:
             continue
@@ -177,16 +177,26 @@ def _work(
             ros2[1].publish(served.rooms())
 
 
-def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats) -> bool:
-    """A robot's map, into the fleet; False when no mapper of it answered."""
+def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats, silent: set[str]) -> bool:
+    """A robot's map, into the fleet; False when no mapper of it answered.
+
+    A robot that stops answering (not started yet, stopped, its link down) is said once, and
+    once when it answers again; the fleet keeps its last map meanwhile.
+    """
     try:
         reply = fetch_map(session, Keys(robot), MapQuery(trajectory=True), timeout=QUERY_TIMEOUT)
     except MalformedReplyError as err:
         stats.refuse(f"{robot}'s map", str(err))
         return True
     except QueryError as err:
-        stats.note(f"unanswered.{robot}", robot, f"no map from {robot!r} yet: {err}")
+        stats.add(f"unanswered.{robot}")
+        if robot not in silent:
+            silent.add(robot)
+            LOG.warning("no map from %r: %s (asked again every second)", robot, err)
         return False
+    if robot in silent:
+        silent.discard(robot)
+        LOG.info("%r answers again", robot)
     fleet.take(robot, reply)
     stats.add("maps_read")
     try:

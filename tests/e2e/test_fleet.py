@@ -126,8 +126,9 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
         while _ids(shown := _page(page)) != served:
             assert time.monotonic() < deadline, (shown, fleet)
             time.sleep(0.5)
-        picture = tmp_path / "fleet.svg"
+        picture, export = tmp_path / "fleet.svg", tmp_path / "fleet.geojson"
         run_wallmap("plot", str(picture), "--prefix", "F", "--connect", at_a, "--timeout", "3")
+        run_wallmap("export", str(export), "--prefix", "F", "--connect", at_a, "--timeout", "3")
         merge.stop()  # a merge service restarted rebuilds the fleet's map from the robots' maps
         stack.start("merge-again", "merge", "--robots", "A,B", "--prefix", "F", "--connect", at_a)
         deadline = time.monotonic() + 30
@@ -165,6 +166,8 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
     ids = {r["id"] for r in rooms["rooms"]}
     assert all(set(d["rooms"]) <= ids for d in rooms["doors"])
     assert all(set(r["walls"]) <= {w["id"] for w in fleet["walls"]} for r in rooms["rooms"])
+    kinds = [f["geometry"]["type"] for f in json.loads(export.read_text())["features"]]
+    assert kinds.count("Polygon") == len(rooms["rooms"]), "GeoJSON: a Polygon per room"
     svg = picture.read_text()
     paths = re.findall(r'<polyline class="trajectory"[^>]*stroke="(#[0-9a-f]{6})"', svg)
     assert len(set(paths)) == 2, "each robot's path, in its own colour"
