@@ -76,16 +76,8 @@ def one_building(kind: str, seed: int, frames: int, folder: Path) -> str:
     )
 
 
-def _records(segments: np.ndarray, first_id: int) -> tuple[WallRecord, ...]:
-    out = []
-    for k, (p, q) in enumerate(segments):
-        d = q - p
-        normal = np.array([-d[1], d[0]]) / np.hypot(*d)
-        u, v = (normal @ p) * normal
-        ends = (float(p[0]), float(p[1])), (float(q[0]), float(q[1]))
-        cov = ((1e-4, 0.0), (0.0, 1e-4))
-        out.append(WallRecord(first_id + k, float(u), float(v), cov, *ends, (ends,), 10))
-    return tuple(out)
+def _records(segments: np.ndarray) -> tuple[WallRecord, ...]:
+    return tuple(WallRecord.from_segment(k, p, q, n_obs=10) for k, (p, q) in enumerate(segments))
 
 
 def cost(rounds: int = 5) -> tuple[int, int, float, float]:
@@ -109,9 +101,9 @@ def cost(rounds: int = 5) -> tuple[int, int, float, float]:
         align(Walls.of(world), Walls.of(mine))
         aligning.append(time.perf_counter() - started)
     fleet = Fleet(["A", "B"])
-    walls = _records(world, 0)
+    walls = _records(world)
     fleet.take("A", MapReply(frames=1, walls=walls))
-    fleet.take("B", MapReply(frames=1, walls=_records(mine, 0)))
+    fleet.take("B", MapReply(frames=1, walls=_records(mine)))
     fleet.update()  # aligns
     for k in range(rounds):  # A's map again, five walls seen once more: an update
         seen = {*range(5 * k, 5 * k + 5)}

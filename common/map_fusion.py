@@ -46,7 +46,7 @@ class FuseConfig:
         join_gap: longest gap (m) along the line between their extents.
     """
 
-    parallel: float = 3.0
+    parallel: float = 5.0
     offset: float = 0.12
     join_gap: float = 1.0
 

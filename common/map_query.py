@@ -16,6 +16,7 @@ import zenoh
 
 from wallmap.common.codec import MessageError, decode
 from wallmap.common.map_records import MapReply
+from wallmap.common.runtime import drain
 from wallmap.common.transport import Keys
 
 T = TypeVar("T")
@@ -155,3 +156,34 @@ def _rooms_body(body: Any) -> dict[str, Any]:
     ):
         raise MessageError("it has no 'rooms' and 'doors' lists")
     return body
+
+
+def answer_map_queries(
+    channel: zenoh.handlers.Handler[zenoh.Query],
+    reply: Callable[[MapQuery, str], bytes],
+    count: Callable[[str], None],
+) -> None:
+    """Answer ``{prefix}/map/walls`` queries from a channel until it is undeclared.
+
+    The selector is checked (a bad one is refused with the reason), ``reply(selection, format)``
+    gives the encoded payload, msgpack or JSON; ``count("queries")`` after each. The mapper and a
+    fleet's merge service answer alike.
+    """
+    for query in drain(channel):
+        with query:
+            params = dict(query.parameters)
+            try:
+                selection = MapQuery.from_parameters(params)
+            except ValueError as err:
+                query.reply_err(str(err))
+                continue
+            fmt = params.get("format") or "msgpack"
+            if fmt not in ("msgpack", "json"):
+                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+                continue
+            if fmt == "json":
+                encoding = zenoh.Encoding.APPLICATION_JSON
+                query.reply(query.key_expr, reply(selection, fmt), encoding=encoding)
+            else:
+                query.reply(query.key_expr, reply(selection, fmt))
+        count("queries")

@@ -118,6 +118,27 @@ class WallRecord:
         }
 
     @classmethod
+    def from_segment(
+        cls,
+        wall_id: int,
+        p0: Point,
+        p1: Point,
+        n_obs: int = 1,
+        cov: tuple[Point, Point] = ((1e-4, 0.0), (0.0, 1e-4)),
+    ) -> WallRecord:
+        """A wall seen as one segment: (u, v) its line's closest point to the origin.
+
+        For walls that come from elsewhere (a floor plan, another program's map), and for the
+        tests and benchmarks that make maps by hand. The line must not pass through the origin.
+        """
+        (x0, y0), (x1, y1) = p0, p1
+        length = math.hypot(x1 - x0, y1 - y0)
+        nx, ny = (y0 - y1) / length, (x1 - x0) / length
+        rho = nx * x0 + ny * y0
+        ends = (float(x0), float(y0)), (float(x1), float(y1))
+        return cls(wall_id, rho * nx, rho * ny, cov, *ends, (ends,), n_obs)
+
+    @classmethod
     def from_map(cls, m: Any) -> WallRecord:
         """A received record, checked; MessageError names the field that is wrong."""
         m = _table(m, "a wall record")

@@ -32,7 +32,7 @@ from wallmap.common.delivery import (
     RunProgress,
     subscribe_with_history,
 )
-from wallmap.common.map_query import MapQuery
+from wallmap.common.map_query import MapQuery, answer_map_queries
 from wallmap.common.messages import Observations, Pose, Progress, pack, unpack_observations
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, ZenohSettings, open_session
@@ -221,7 +221,11 @@ def run(
         queryable = session.declare_queryable(keys.map_walls)
         rooms = RoomsServer(session, keys, core.lock, core.mapping, stats, mapper.ros2_out)
         workers = [
-            threading.Thread(target=_queries, args=(queryable.handler, core), daemon=True),
+            threading.Thread(
+                target=answer_map_queries,
+                args=(queryable.handler, core.reply, core.stats.add),
+                daemon=True,
+            ),
             threading.Thread(target=_updates, args=(core, updates, stop, ros2), daemon=True),
             threading.Thread(target=_repeat_progress, args=(core, progress, stop), daemon=True),
             *rooms.workers(stop),
@@ -562,24 +566,3 @@ def _count_drop(stats: Stats, obs: Observations, reason: str, pose_wait: float) 
     }[reason]
     stats.add("dropped")
     stats.note(f"dropped.{reason}", reason, f"dropped the frame at {obs.stamp:.3f}: {why}")
-
-
-def _queries(channel: zenoh.handlers.Handler[zenoh.Query], core: MapperCore) -> None:
-    for query in drain(channel):
-        with query:
-            params = query.parameters
-            try:
-                selection = MapQuery.from_parameters(dict(params))
-            except ValueError as err:
-                query.reply_err(str(err))
-                continue
-            fmt = params.get("format") or "msgpack"
-            if fmt not in ("msgpack", "json"):
-                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
-                continue
-            payload = core.reply(selection, fmt)
-            if fmt == "json":
-                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
-            else:
-                query.reply(query.key_expr, payload)
-        core.stats.add("queries")

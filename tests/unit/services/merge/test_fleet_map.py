@@ -16,14 +16,9 @@ FRAME_B = np.array([4.0, -3.0, 1.1])  # where robot B's map frame lies in A's
 
 
 def _records(segments: np.ndarray, first_id: int) -> tuple[WallRecord, ...]:
-    out = []
-    for k, (p, q) in enumerate(segments):
-        d = q - p
-        normal = np.array([-d[1], d[0]]) / np.hypot(*d)
-        u, v = (normal @ p) * normal
-        ends = (float(p[0]), float(p[1])), (float(q[0]), float(q[1]))
-        out.append(WallRecord(first_id + k, u, v, ((1e-4, 0.0), (0.0, 1e-4)), *ends, (ends,), 5))
-    return tuple(out)
+    return tuple(
+        WallRecord.from_segment(first_id + k, p, q, n_obs=5) for k, (p, q) in enumerate(segments)
+    )
 
 
 def _maps() -> tuple[np.ndarray, np.ndarray]:
