@@ -1,6 +1,6 @@
 """The detector service: sensor frames in over Zenoh, wall observations out.
 
-Frames arrive with the history window (``common.history``: a detector restarted mid-run gets the
+Frames arrive with the history window (``common.delivery``: a detector restarted mid-run gets the
 frames it missed, a link back recovers what was lost on it) through a channel that the
 service's own thread drains. Under ``wallmap player --fast`` the player keeps at most 16 frames
 beyond what the mapper acknowledged in flight, so a slow detector slows the player and nothing

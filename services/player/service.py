@@ -195,7 +195,7 @@ def _control(
 class _Outlet:
     """Where the frames go: the publishers with their history, and the progress messages.
 
-    Frames and poses keep the history window in their caches (``common.history``), so that a
+    Frames and poses keep the history window in their caches (``common.delivery``), so that a
     detector or mapper that restarts, or a link that comes back, gets what it missed. The
     frames' cache is sized on the first frame, by its bytes.
     """

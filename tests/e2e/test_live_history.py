@@ -1,7 +1,7 @@
 """Real-time playback loses nothing when a service, the router or a link goes away for a while.
 
 A live sensor does not replay, so frames, poses and observations are published with a window
-of history (``common.history``): a detector or mapper that restarts, or a router that comes
+of history (``common.delivery``): a detector or mapper that restarts, or a router that comes
 back, catches up on what it missed, and the mapper takes every run's frames in order. Each test
 plays a 600-frame bag at 4x real time, SIGKILLs one process 40 % in, restarts it 2 s later, and
 asserts every frame integrated and the same walls, with the same ids, as an uninterrupted run.

@@ -206,7 +206,7 @@ def test_router_killed_and_restarted_in_real_time_the_map_goes_on(stack, long_ba
     after = reply["frames"]
     lost = scene.n_frames - after - skipped
     print(f"\nframes integrated: {before} before the kill, {after} in all; {lost} lost")
-    # What was published while no router ran comes back from the history (common.history).
+    # What was published while no router ran comes back from the history (common.delivery).
     assert lost == 0
     assert reply["lost"] == 0
     for name in ("mapper", "detector", "player"):

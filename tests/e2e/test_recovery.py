@@ -1,7 +1,7 @@
 """No frame lost when a detector or the router restarts mid-bag under `--fast`.
 
 The mapper takes each run's frames once and in order and acknowledges by frame number; frames
-lost on the way come back from the history (``common.history``), and the player only waits.
+lost on the way come back from the history (``common.delivery``), and the player only waits.
 """
 
 from __future__ import annotations
