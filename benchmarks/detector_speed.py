@@ -52,9 +52,11 @@ def sklearn_lines(scan: np.ndarray, params: RansacParams) -> int:
             _, _, axes = np.linalg.svd(centred, full_matrices=False)
             local = centred @ axes.T  # the cluster's main direction along x
             model = RANSACRegressor(
-                min_samples=2, residual_threshold=params.inlier_min, max_trials=params.iterations,
+                min_samples=2,
+                residual_threshold=params.inlier_min,
+                max_trials=params.iterations,
                 random_state=0,
-            )  # fmt: skip
+            )
             try:
                 model.fit(local[:, :1], local[:, 1])
             except ValueError:  # no consensus

@@ -37,8 +37,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         bag = Path(folder) / "depth"
         camera = Camera(width=args.width, height=args.height)
-        write_scene_bag(bag, seed=7, n_frames=args.frames, fmt="ros2-mcap", sensor=args.sensor,
-                        camera=camera)  # fmt: skip
+        write_scene_bag(
+            bag, seed=7, n_frames=args.frames, fmt="ros2-mcap", sensor=args.sensor, camera=camera
+        )
         config = Config()
         pipeline = pipeline_for(config)
         frames = list(played(bag, config, pipeline))
@@ -67,8 +68,10 @@ def main() -> None:
         detector.detect(frame)
         whole.append(time.perf_counter() - start)
     total = statistics.median(whole)
-    print(f"{len(frames)} frames of {args.width}x{args.height} {args.sensor}, "
-          f"{frames[0].points.shape[0]} heights a column\n")  # fmt: skip
+    print(
+        f"{len(frames)} frames of {args.width}x{args.height} {args.sensor}, "
+        f"{frames[0].points.shape[0]} heights a column\n"
+    )
     print("| stage | what | ms / frame (median) | share of detect |")
     print("|---|---|---:|---:|")
     what = {

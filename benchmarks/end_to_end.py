@@ -95,9 +95,15 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "vga.bag"
         info = write_scene_bag(
-            bag, seed=7, n_frames=args.frames, fmt="ros1", sensor="pointcloud",
-            camera=Camera(width=640, height=480), rate_hz=30.0, compress=args.compress,
-        )  # fmt: skip
+            bag,
+            seed=7,
+            n_frames=args.frames,
+            fmt="ros1",
+            sensor="pointcloud",
+            camera=Camera(width=640, height=480),
+            rate_hz=30.0,
+            compress=args.compress,
+        )
         size = bag.stat().st_size / 1e6
         for _ in range(args.repeats):  # interleaved, so a busy spell hits all of them alike
             floors.append(read_floor(bag))

@@ -107,8 +107,10 @@ def jackal(out: Path | None) -> None:
         ("motion capture, judged (default)", configured(MOCAP)),
         ("scan matching (--odometry)", configured(None, odometry=True)),
     ]
-    print(f"{'poses':<36} {'walls':>5} {'fans':>4} {'on walls':>8} {'latency':>8} "
-          f"{'heading sd':>10} {'refused':>7} {'mapper ms/frame':>15}")  # fmt: skip
+    print(
+        f"{'poses':<36} {'walls':>5} {'fans':>4} {'on walls':>8} {'latency':>8} "
+        f"{'heading sd':>10} {'refused':>7} {'mapper ms/frame':>15}"
+    )
     for label, config in runs:
         pipeline, mapper_ms = timed_run(JACKAL, config)
         walls, share = explained(pipeline, JACKAL)
@@ -117,8 +119,10 @@ def jackal(out: Path | None) -> None:
         heading = f"{found['heading_sd_deg']:.2f} deg" if found else "-"
         refused = str(found.get("frames_refused", "-"))
         ms = f"{statistics.median(mapper_ms):.2f}" if mapper_ms else "-"
-        print(f"{label:<36} {len(walls):>5} {len(fans(walls)):>4} {share:>8.1%} {latency:>8} "
-              f"{heading:>10} {refused:>7} {ms:>15}")  # fmt: skip
+        print(
+            f"{label:<36} {len(walls):>5} {len(fans(walls)):>4} {share:>8.1%} {latency:>8} "
+            f"{heading:>10} {refused:>7} {ms:>15}"
+        )
         if out is not None:
             name = "odometry" if config.up.odometry else "judged" if found else "trusted"
             points = _placed_scans(pipeline, JACKAL)
@@ -143,14 +147,23 @@ SOURCES = ["tf", "odom", "pose:/amcl_pose", "tum"]  # odom also drifts (2 %, 1 d
 
 def generated(latencies: list[float]) -> None:
     """Part 2."""
-    print(f"{'source':<16} {'late':>6} {'found':>7} {'precision':>9} {'recall':>6} "
-          f"{'dups':>4} {'offset':>7} {'recovered':>9} {'refused':>7}")  # fmt: skip
+    print(
+        f"{'source':<16} {'late':>6} {'found':>7} {'precision':>9} {'recall':>6} "
+        f"{'dups':>4} {'offset':>7} {'recovered':>9} {'refused':>7}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for latency in latencies:
-            faults = PoseFaults(latency=latency, heading_sd_deg=0.5,
-                                glitches=(Glitch(15, 3, 12, 0.1),), seed=3)  # fmt: skip
-            info = write_scene_bag(Path(tmp) / f"late{latency}.bag", seed=3, n_frames=600,
-                                   fmt="ros1", sensor="depth16", faults=faults)  # fmt: skip
+            faults = PoseFaults(
+                latency=latency, heading_sd_deg=0.5, glitches=(Glitch(15, 3, 12, 0.1),), seed=3
+            )
+            info = write_scene_bag(
+                Path(tmp) / f"late{latency}.bag",
+                seed=3,
+                n_frames=600,
+                fmt="ros1",
+                sensor="depth16",
+                faults=faults,
+            )
             plan, _, seen = load_truth(info.truth_path)
             for kind in SOURCES:
                 spec = f"tum:{tum_path_for(info.path)}" if kind == "tum" else kind
@@ -158,10 +171,13 @@ def generated(latencies: list[float]) -> None:
                 reply = serving.reply(pipeline.map, MapQuery())
                 score = evaluate_map(list(reply.walls), plan, seen)
                 found = pipeline.mapping.judge.summary()
-                print(f"{kind:<16} {latency * 1e3:>4.0f}ms {found['latency_s'] * 1e3:>5.0f}ms "
-                      f"{score.precision:>9.3f} {score.recall:>6.3f} {score.duplicates:>4} "
-                      f"{score.median_offset_m * 100:>5.1f}cm {found['frames_recovered']:>9} "
-                      f"{found['frames_refused']:>7}", flush=True)  # fmt: skip
+                print(
+                    f"{kind:<16} {latency * 1e3:>4.0f}ms {found['latency_s'] * 1e3:>5.0f}ms "
+                    f"{score.precision:>9.3f} {score.recall:>6.3f} {score.duplicates:>4} "
+                    f"{score.median_offset_m * 100:>5.1f}cm {found['frames_recovered']:>9} "
+                    f"{found['frames_refused']:>7}",
+                    flush=True,
+                )
 
 
 def main() -> None:

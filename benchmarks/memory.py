@@ -47,10 +47,15 @@ def main() -> None:
     zenoh = ["--connect", endpoint]
     with tempfile.TemporaryDirectory() as tmp:
         bags = [
-            write_scene_bag(Path(tmp) / f"s{i}.bag", seed=900 + i, n_frames=args.frames,
-                            fmt="ros1", sensor="depth16").path
+            write_scene_bag(
+                Path(tmp) / f"s{i}.bag",
+                seed=900 + i,
+                n_frames=args.frames,
+                fmt="ros1",
+                sensor="depth16",
+            ).path
             for i in range(args.bags)
-        ]  # fmt: skip
+        ]
         procs = {"router": subprocess.Popen([*wallmap, "router", "--listen", endpoint])}
         procs |= {n: subprocess.Popen([*wallmap, n, *zenoh]) for n in ("mapper", "detector")}
         series: dict[str, list[float]] = {n: [] for n in (*procs, "player")}

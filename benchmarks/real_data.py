@@ -50,8 +50,10 @@ REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 def real_bags(out: Path | None) -> None:
     """Part 1: one row per real bag."""
-    print(f"{'bag':<36} {'walls':>6} {'scans':>9} {'on walls':>9} {'dups':>5} {'longest':>12}"
-          f" {'angle':>6} {'ms/scan':>8}")  # fmt: skip
+    print(
+        f"{'bag':<36} {'walls':>6} {'scans':>9} {'on walls':>9} {'dups':>5} {'longest':>12}"
+        f" {'angle':>6} {'ms/scan':>8}"
+    )
     for bag in sorted(REAL.glob("*")):
         if bag.name == "README.md" or (bag.is_dir() and not (bag / "metadata.yaml").exists()):
             continue  # rgbd/ holds depth recordings: benchmarks/real_rgbd.py maps them
@@ -115,8 +117,10 @@ def drift(seeds: list[int], frames: int) -> None:
                 )
                 rows.setdefault(label, []).append((score, error))
     print(f"\nseeds {','.join(map(str, seeds))}, {frames} frames each, medians over the seeds")
-    print(f"{'poses':<24} {'precision':>9} {'recall':>7} {'dups':>5} {'offset cm':>10}"
-          f" {'angle deg':>10} {'pose error cm':>14}")  # fmt: skip
+    print(
+        f"{'poses':<24} {'precision':>9} {'recall':>7} {'dups':>5} {'offset cm':>10}"
+        f" {'angle deg':>10} {'pose error cm':>14}"
+    )
     for label, results in rows.items():
         scores = [s for s, _ in results]
         print(

@@ -59,8 +59,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{'recording':<20} {'brought as':<22} {'frames':>7} {'walls':>6} {'fans':>5} "
-          f"{'dups':>5} {'on walls':>10} {'ms/frame':>8}")  # fmt: skip
+    print(
+        f"{'recording':<20} {'brought as':<22} {'frames':>7} {'walls':>6} {'fans':>5} "
+        f"{'dups':>5} {'on walls':>10} {'ms/frame':>8}"
+    )
     for name, (folder, camera) in RGBD.items():
         if not folder.is_dir():
             print(f"{name}: {folder} is absent")

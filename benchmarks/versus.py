@@ -38,13 +38,19 @@ def worktree(commit: str) -> Iterator[Path]:
     """The commit's code in a temporary folder, removed afterwards."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(path), commit],
-                       check=True, capture_output=True)  # fmt: skip
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(path), commit],
+            check=True,
+            capture_output=True,
+        )
         try:
             yield path
         finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)],
-                           check=False, capture_output=True)  # fmt: skip
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)],
+                check=False,
+                capture_output=True,
+            )
 
 
 def _cpu(proc: subprocess.Popen[str]) -> float:
@@ -89,10 +95,24 @@ def run_once(
 def recordings(folder: Path, jackal: bool) -> dict[str, tuple[Path, tuple[str, ...]]]:
     """The generated bags, and the Jackal's run where asked and present."""
     depth, cloud = folder / "depth.bag", folder / "cloud.bag"
-    write_scene_bag(depth, seed=3, n_frames=400, fmt="ros1", sensor="depth16",
-                    camera=Camera(width=320, height=240), rate_hz=15.0)  # fmt: skip
-    write_scene_bag(cloud, seed=7, n_frames=90, fmt="ros1", sensor="pointcloud",
-                    camera=Camera(width=640, height=480), rate_hz=30.0)  # fmt: skip
+    write_scene_bag(
+        depth,
+        seed=3,
+        n_frames=400,
+        fmt="ros1",
+        sensor="depth16",
+        camera=Camera(width=320, height=240),
+        rate_hz=15.0,
+    )
+    write_scene_bag(
+        cloud,
+        seed=7,
+        n_frames=90,
+        fmt="ros1",
+        sensor="pointcloud",
+        camera=Camera(width=640, height=480),
+        rate_hz=30.0,
+    )
     found = {"320x240 depth, 15 Hz, 400": (depth, ()), "640x480 cloud, 30 Hz, 90": (cloud, ())}
     if jackal and JACKAL.exists():
         found["Jackal, motion capture, 414"] = (JACKAL, MOCAP)
@@ -107,8 +127,12 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--jackal", action="store_true", help="the real Jackal run too")
     args = parser.parse_args()
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.base],
-                            check=True, capture_output=True, text=True).stdout.strip()  # fmt: skip
+    commit = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--short", args.base],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
     with tempfile.TemporaryDirectory() as tmp, worktree(commit) as base:
         trees = {commit: base, "this checkout": ROOT}
         bags = recordings(Path(tmp), args.jackal)
@@ -118,8 +142,11 @@ def main() -> None:
                 for name, tree in trees.items():
                     runs.setdefault((label, name), []).append(run_once(tree, bag, extra))
     print(f"medians of {args.rounds} rounds; CPU seconds include each process's start-up")
-    print(f"{'recording':<28} {'code':<14} {'seconds':>8} "
-          + " ".join(f"{p:>8}" for p in PROCESSES) + f" {'vs ' + commit:>12}")  # fmt: skip
+    print(
+        f"{'recording':<28} {'code':<14} {'seconds':>8} "
+        + " ".join(f"{p:>8}" for p in PROCESSES)
+        + f" {'vs ' + commit:>12}"
+    )
     for (label, name), done in runs.items():
         before = runs[(label, commit)]
         pairs = zip(done, before, strict=True)

@@ -427,9 +427,12 @@ class RunProgress:
         """Frame ``seq`` of ``run`` is done (integrated, or dropped); its acknowledgement waits."""
         old = self.runs.pop(run, Progress(run, 0, 0, 0))
         new = Progress(
-            run, seq + 1, old.integrated + int(integrated), old.dropped + int(not integrated),
+            run,
+            seq + 1,
+            old.integrated + int(integrated),
+            old.dropped + int(not integrated),
             self.epoch,
-        )  # fmt: skip
+        )
         self.runs[run] = new
         while len(self.runs) > MAX_RUNS:
             self.runs.popitem(last=False)

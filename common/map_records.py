@@ -21,8 +21,15 @@ from wallmap.common.codec import MessageError, check_coordinates
 Point = tuple[float, float]
 Segment = tuple[Point, Point]
 COUNTERS = (
-    "dropped", "dropped_reasons", "refused", "skipped", "lost", "missed", "slam", "pose_source",
-)  # fmt: skip
+    "dropped",
+    "dropped_reasons",
+    "refused",
+    "skipped",
+    "lost",
+    "missed",
+    "slam",
+    "pose_source",
+)
 
 
 def _number(value: Any, name: str) -> float:

@@ -232,8 +232,9 @@ class JumpDetector:
         jumped = False
         if len(self._xy) >= 10:
             scale_xy, scale_yaw = 1.4826 * self._xy.median(), 1.4826 * self._yaw.median()
-            jumped = (xy > max(self.factor * scale_xy, self.least[0])
-                      or yaw > max(self.factor * scale_yaw, self.least[1]))  # fmt: skip
+            jumped = xy > max(self.factor * scale_xy, self.least[0]) or yaw > max(
+                self.factor * scale_yaw, self.least[1]
+            )
         if not jumped:
             self._xy.add(xy)
             self._yaw.add(yaw)

@@ -52,8 +52,15 @@ def main() -> None:
         start, first = time.monotonic(), poses[0][0]
         for stamp, x, y, yaw in poses:
             time.sleep(max(0.0, start + (stamp - first) / args.rate - time.monotonic()))
-            pose = {"v": 1, "stamp": stamp, "frame": "map", "child": "base_link",
-                    "x": x, "y": y, "yaw": yaw}  # fmt: skip
+            pose = {
+                "v": 1,
+                "stamp": stamp,
+                "frame": "map",
+                "child": "base_link",
+                "x": x,
+                "y": y,
+                "yaw": yaw,
+            }
             publisher.put(msgpack.packb(pose))
         print(f"published {len(poses)} poses")
 

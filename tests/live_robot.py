@@ -49,8 +49,14 @@ class Robot:
     Announced from the start: the bridge's routes, or rmw_zenoh's liveliness tokens.
     """
 
-    def __init__(self, session: zenoh.Session, bag: Path, namespace: str, naming: str = "bridge",
-                 renamed: dict[str, str] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        session: zenoh.Session,
+        bag: Path,
+        namespace: str,
+        naming: str = "bridge",
+        renamed: dict[str, str] | None = None,
+    ) -> None:
         """``renamed``: topics the robot publishes under another name (old -> new)."""
         self.session, self.bag, self.namespace, self.naming = session, bag, namespace, naming
         self.renamed = renamed or {}
@@ -61,20 +67,27 @@ class Robot:
             self.types = {c.topic: c.msgtype for c in reader.connections}
         self._declared: list = []
         if naming != "rmw_zenoh":  # either bridge: its admin space
-            self._declared.append(session.declare_queryable(
-                f"@/{session.info.zid()}/ros2/route/topic/pub/**", self._routes))  # fmt: skip
+            self._declared.append(
+                session.declare_queryable(
+                    f"@/{session.info.zid()}/ros2/route/topic/pub/**", self._routes
+                )
+            )
         if naming == "bridge":
             self._declared.append(session.declare_queryable(self.key("/tf_static"), self._answer))
         else:
             self._static_publisher = ext.declare_advanced_publisher(
-                session, self.key("/tf_static"), cache=ext.CacheConfig(max_samples=1),
+                session,
+                self.key("/tf_static"),
+                cache=ext.CacheConfig(max_samples=1),
                 sample_miss_detection=ext.MissDetectionConfig(sporadic_heartbeat=0.5),
                 publisher_detection=True,
-            )  # fmt: skip
+            )
             self._declared.append(self._static_publisher)
         if naming == "rmw_zenoh":
-            self._declared += [session.liveliness().declare_token(self._token(topic, n))
-                               for n, topic in enumerate(self.types)]  # fmt: skip
+            self._declared += [
+                session.liveliness().declare_token(self._token(topic, n))
+                for n, topic in enumerate(self.types)
+            ]
 
     def key(self, topic: str) -> str:
         name = f"{self.namespace}/{self.renamed.get(topic, topic).strip('/')}".strip("/")
@@ -87,9 +100,11 @@ class Robot:
         """rmw_zenoh's liveliness token of a publisher (Jazzy's layout)."""
         name = f"/{self.namespace}/{topic.strip('/')}".replace("//", "/").replace("/", "%")
         msgtype = self.types[topic]
-        return (f"@ros2_lv/{DOMAIN}/{self.session.info.zid()}/0/{10 + entity}/MP/%/"
-                f"{('%' + self.namespace) if self.namespace else '%'}/robot_node/{name}/"
-                f"{dds_type_name(msgtype)}/{HASHES.hash_rihs01(msgtype)}/::,10:,:,:,,")  # fmt: skip
+        return (
+            f"@ros2_lv/{DOMAIN}/{self.session.info.zid()}/0/{10 + entity}/MP/%/"
+            f"{('%' + self.namespace) if self.namespace else '%'}/robot_node/{name}/"
+            f"{dds_type_name(msgtype)}/{HASHES.hash_rihs01(msgtype)}/::,10:,:,:,,"
+        )
 
     def _answer(self, query: zenoh.Query) -> None:
         if self._static is not None:  # the bridge's cache of a transient-local topic
@@ -99,9 +114,16 @@ class Robot:
         """The bridge's admin space: a route for each of the robot's topics."""
         for topic, msgtype in self.types.items():
             key = self.key(topic)
-            route = {"ros2_name": topic, "ros2_type": msgtype, "zenoh_key_expr": key,
-                     "publication_cache_size": 0, "dds_reader": "", "priority": 5,
-                     "remote_routes": [], "local_nodes": ["/robot_node"]}  # fmt: skip
+            route = {
+                "ros2_name": topic,
+                "ros2_type": msgtype,
+                "zenoh_key_expr": key,
+                "publication_cache_size": 0,
+                "dds_reader": "",
+                "priority": 5,
+                "remote_routes": [],
+                "local_nodes": ["/robot_node"],
+            }
             reply_key = f"@/{self.session.info.zid()}/ros2/route/topic/pub/{key}"
             if zenoh.KeyExpr(reply_key).intersects(query.key_expr):
                 query.reply(reply_key, json.dumps(route))
@@ -174,8 +196,9 @@ def mapped(query: Callable[[], dict], sent: int, share: float = 0.95) -> dict:
     return reply
 
 
-def play_to_the_source(endpoint: str, prefix_args: tuple[str, ...], bag: Path, namespace: str,
-                       log: Path) -> Robot:  # fmt: skip
+def play_to_the_source(
+    endpoint: str, prefix_args: tuple[str, ...], bag: Path, namespace: str, log: Path
+) -> Robot:
     """A robot on the bridge's keys, announcing its topics as soon as the router on ``endpoint``
     is up; once `wallmap ros2` is live there (60 s at most; ``log`` says why not), the bag
     played to it. The robot, with what it sent."""

@@ -90,14 +90,33 @@ from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
 
 FAILURES = (
-    TransportError, PlayerError, TfError, StateError, QueryError, LaunchError, StalledError,
-    OSError, ValueError,
-)  # fmt: skip
+    TransportError,
+    PlayerError,
+    TfError,
+    StateError,
+    QueryError,
+    LaunchError,
+    StalledError,
+    OSError,
+    ValueError,
+)
 SERVICE = math.inf  # services wait for their router as long as it takes
 ALL = (
-    ZENOH, HISTORY, SPEED, SOURCE, PLAYER, BAND, DETECTOR, STATE, MAPPER, POSES, SLAM, ODOMETRY,
-    UP, VIEW,
-)  # fmt: skip
+    ZENOH,
+    HISTORY,
+    SPEED,
+    SOURCE,
+    PLAYER,
+    BAND,
+    DETECTOR,
+    STATE,
+    MAPPER,
+    POSES,
+    SLAM,
+    ODOMETRY,
+    UP,
+    VIEW,
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -113,8 +132,11 @@ def _cmd_router(args: argparse.Namespace, config: Config) -> int:
     listen = tuple(args.listen or [DEFAULT_CONNECT])
     join = tuple(getattr(args, ROUTER_JOIN.dest) or ())  # the flag only: WALLMAP_CONNECT is
     with open_session(config.zenoh, mode="router", listen=listen, join=join):  # for services
-        log.info("listening on %s%s", ", ".join(listen),
-                 f"; joining the routers at {', '.join(join)}" if join else "")  # fmt: skip
+        log.info(
+            "listening on %s%s",
+            ", ".join(listen),
+            f"; joining the routers at {', '.join(join)}" if join else "",
+        )
         stop.wait()
     return 0
 
@@ -315,8 +337,13 @@ def _cmd_config(_: argparse.Namespace, config: Config) -> int:
 
 def _add_bag_argument(p: argparse.ArgumentParser, *, optional: bool = False) -> None:
     what = "ROS 1 .bag file, ROS 2 bag folder, or TUM RGB-D folder (depth.txt, depth/*.png)"
-    p.add_argument("bag", type=Path, metavar="BAG", nargs="?" if optional else None,
-                   help=what + (" (not with --ros2)" if optional else ""))  # fmt: skip
+    p.add_argument(
+        "bag",
+        type=Path,
+        metavar="BAG",
+        nargs="?" if optional else None,
+        help=what + (" (not with --ros2)" if optional else ""),
+    )
 
 
 def _add_map_filters(p: argparse.ArgumentParser, *, min_obs: int = 1) -> None:
@@ -343,15 +370,49 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--listen", action="append", metavar="ENDPOINT", help=f"default {DEFAULT_CONNECT}"
     )
-    p = add_command(sub, "player", "play a bag: sensor frames and poses", _cmd_player,
-                    SPEED, SOURCE, PLAYER, HISTORY, ZENOH)  # fmt: skip
+    p = add_command(
+        sub,
+        "player",
+        "play a bag: sensor frames and poses",
+        _cmd_player,
+        SPEED,
+        SOURCE,
+        PLAYER,
+        HISTORY,
+        ZENOH,
+    )
     _add_bag_argument(p)
-    add_command(sub, "detector", "sensor frames -> wall observations", _cmd_detector,
-                DETECTOR, BAND, HISTORY, ZENOH)  # fmt: skip
-    add_command(sub, "mapper", "the EKF wall map, served as a queryable", _cmd_mapper,
-                STATE, MAPPER, POSES, SLAM, HISTORY, ZENOH)  # fmt: skip
-    add_command(sub, "odometry", "poses from the sensor frames (scan matching)", _cmd_odometry,
-                ODOMETRY, HISTORY, ZENOH)  # fmt: skip
+    add_command(
+        sub,
+        "detector",
+        "sensor frames -> wall observations",
+        _cmd_detector,
+        DETECTOR,
+        BAND,
+        HISTORY,
+        ZENOH,
+    )
+    add_command(
+        sub,
+        "mapper",
+        "the EKF wall map, served as a queryable",
+        _cmd_mapper,
+        STATE,
+        MAPPER,
+        POSES,
+        SLAM,
+        HISTORY,
+        ZENOH,
+    )
+    add_command(
+        sub,
+        "odometry",
+        "poses from the sensor frames (scan matching)",
+        _cmd_odometry,
+        ODOMETRY,
+        HISTORY,
+        ZENOH,
+    )
 
     p = add_command(
         sub, "merge", "one map of several robots' maps, aligned by their walls", _cmd_merge, ZENOH
@@ -364,8 +425,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="the robots' prefixes; the fleet's map is in the first one's frame",
     )
 
-    add_command(sub, "ros2", "a live ROS 2 robot's topics on Zenoh -> frames and poses",
-                _cmd_ros2, ROS2, HISTORY, ZENOH)  # fmt: skip
+    add_command(
+        sub,
+        "ros2",
+        "a live ROS 2 robot's topics on Zenoh -> frames and poses",
+        _cmd_ros2,
+        ROS2,
+        HISTORY,
+        ZENOH,
+    )
 
     p = add_command(sub, "query", "print the current wall map", _cmd_query, ZENOH)
     p.add_argument("--json", action="store_true", help="the contract's JSON instead of a table")
@@ -378,9 +446,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="JSON instead of a table")
     p.add_argument("--timeout", type=positive, default=2.0, help="seconds to wait for answers")
 
-    p = add_command(sub, "up", "router + detector + mapper (+ odometry) + player, one machine",
-                    _cmd_up, SPEED, SOURCE, BAND, STATE, POSES, SLAM, UP, ROS2_TOPICS, HISTORY,
-                    ZENOH)  # fmt: skip
+    p = add_command(
+        sub,
+        "up",
+        "router + detector + mapper (+ odometry) + player, one machine",
+        _cmd_up,
+        SPEED,
+        SOURCE,
+        BAND,
+        STATE,
+        POSES,
+        SLAM,
+        UP,
+        ROS2_TOPICS,
+        HISTORY,
+        ZENOH,
+    )
     _add_bag_argument(p, optional=True)
 
     p = add_command(sub, "plot", "draw the current map (.png or .svg)", _cmd_plot, ZENOH)
@@ -391,8 +472,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", type=Path, metavar="OUT", help="output file")
     _add_map_filters(p)
 
-    p = add_command(sub, "scene", "write a bag of a generated scene, with its ground truth",
-                    _cmd_scene)  # fmt: skip
+    p = add_command(
+        sub, "scene", "write a bag of a generated scene, with its ground truth", _cmd_scene
+    )
     p.add_argument("out", type=Path, metavar="OUT", help="bag file (ROS 1) or folder (ROS 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the floor plan and the drive")
     p.add_argument("--frames", type=int, default=600, help="most frames (the drive may end first)")
@@ -423,24 +505,51 @@ def build_parser() -> argparse.ArgumentParser:
         "map frame at the robot's first pose; the ground truth's map_in_world places that "
         "frame in the plan's",
     )
-    p.add_argument("--pose-latency", type=finite, default=0.0, metavar="SECONDS",
-                   help="every pose source of the bag late by this: its pose stamped t is the "
-                   "robot's at t - SECONDS")  # fmt: skip
-    p.add_argument("--pose-noise", type=non_negative, default=0.0, metavar="DEG",
-                   help="white noise of every pose's heading (degrees)")  # fmt: skip
-    p.add_argument("--pose-position-noise", type=non_negative, default=0.0, metavar="M",
-                   help="white noise of every pose's position (m)")  # fmt: skip
-    p.add_argument("--glitch", type=_glitch, action="append", metavar="START:DUR:DEG:M",
-                   help="a stretch of wrong poses: from START s for DUR s, DEG degrees and M "
-                   "metres off (repeatable)")  # fmt: skip
+    p.add_argument(
+        "--pose-latency",
+        type=finite,
+        default=0.0,
+        metavar="SECONDS",
+        help="every pose source of the bag late by this: its pose stamped t is the "
+        "robot's at t - SECONDS",
+    )
+    p.add_argument(
+        "--pose-noise",
+        type=non_negative,
+        default=0.0,
+        metavar="DEG",
+        help="white noise of every pose's heading (degrees)",
+    )
+    p.add_argument(
+        "--pose-position-noise",
+        type=non_negative,
+        default=0.0,
+        metavar="M",
+        help="white noise of every pose's position (m)",
+    )
+    p.add_argument(
+        "--glitch",
+        type=_glitch,
+        action="append",
+        metavar="START:DUR:DEG:M",
+        help="a stretch of wrong poses: from START s for DUR s, DEG degrees and M "
+        "metres off (repeatable)",
+    )
 
-    p = add_command(sub, "demo", "run the pipeline on the sample bag shipped with wallmap",
-                    _cmd_demo)  # fmt: skip
+    p = add_command(
+        sub, "demo", "run the pipeline on the sample bag shipped with wallmap", _cmd_demo
+    )
     p.add_argument(
         "--out", type=Path, default=Path("wallmap-demo.png"), help="picture (.png or .svg)"
     )
-    add_command(sub, "config", "print the effective configuration as TOML (every flag, --config, "
-                "--set): a file for --config", _cmd_config, *ALL)  # fmt: skip
+    add_command(
+        sub,
+        "config",
+        "print the effective configuration as TOML (every flag, --config, "
+        "--set): a file for --config",
+        _cmd_config,
+        *ALL,
+    )
     add_foxglove_commands(sub)
     add_doctor_command(sub)
     add_view_command(sub)

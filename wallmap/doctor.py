@@ -428,9 +428,12 @@ def add_command(sub: Any) -> None:
     so what it says is what the player will do with the same flags.
     """
     p = add_options_command(
-        sub, "doctor", "inspect a bag: what the player will use, and what is wrong", _cmd_doctor,
+        sub,
+        "doctor",
+        "inspect a bag: what the player will use, and what is wrong",
+        _cmd_doctor,
         SOURCE,
-    )  # fmt: skip
+    )
     p.add_argument(
         "bag",
         type=Path,
@@ -438,8 +441,17 @@ def add_command(sub: Any) -> None:
         help="ROS 1 .bag file, ROS 2 bag folder, .mcap file or TUM RGB-D folder",
     )
     p.add_argument("--json", action="store_true", help="the same facts as JSON, for scripts")
-    p.add_argument("--latency", action=argparse.BooleanOptionalAction, default=True,
-                   help="estimate the pose source's latency as the mapper would, from the first "
-                   "frames (a few seconds of work)")  # fmt: skip
-    p.add_argument("--latency-frames", type=int, default=400, metavar="N",
-                   help="frames the latency is estimated from")  # fmt: skip
+    p.add_argument(
+        "--latency",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="estimate the pose source's latency as the mapper would, from the first "
+        "frames (a few seconds of work)",
+    )
+    p.add_argument(
+        "--latency-frames",
+        type=int,
+        default=400,
+        metavar="N",
+        help="frames the latency is estimated from",
+    )

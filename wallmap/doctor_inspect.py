@@ -624,13 +624,19 @@ def _fill_poses(report: Report, contents: BagContents, stamps: np.ndarray, t0: f
 def inspect_tum(path: Path, source: SourceOptions) -> Report:
     """Inspect a TUM RGB-D folder as the player would open it (``source``: its camera, poses)."""
     files = [f for f in path.rglob("*") if f.is_file()]
-    report = Report(path=str(path), file=FileFacts(sum(f.stat().st_size for f in files), "",
-                                                    "tum", name_matches=True))  # fmt: skip
+    report = Report(
+        path=str(path),
+        file=FileFacts(sum(f.stat().st_size for f in files), "", "tum", name_matches=True),
+    )
     try:
         folder = TumFolder(
-            path, pose_source=source.pose_source, intrinsics=source.intrinsics,
-            depth_scale=source.depth_scale, level=source.level, floor_z=source.floor_z,
-        )  # fmt: skip
+            path,
+            pose_source=source.pose_source,
+            intrinsics=source.intrinsics,
+            depth_scale=source.depth_scale,
+            level=source.level,
+            floor_z=source.floor_z,
+        )
     except PlayerError as err:
         return _refuse(report, str(err))
     report.readable = True
@@ -640,11 +646,14 @@ def inspect_tum(path: Path, source: SourceOptions) -> Report:
     steps = np.diff(stamps)
     height, width = folder.size
     report.sensor = SensorFacts(
-        "depth.txt", SENSOR_TYPE, "the folder's depth images", frames=len(stamps),
+        "depth.txt",
+        SENSOR_TYPE,
+        "the folder's depth images",
+        frames=len(stamps),
         rate_hz=round(1.0 / float(np.median(steps)), 3) if steps.size else None,
         frame_ids={OPTICAL_FRAME: len(stamps)},
         geometry={"width": width, "height": height, "encoding": f"PNG / {folder.depth_scale:g}"},
-    )  # fmt: skip
+    )
     spec = str(folder.pose_spec)
     pose = PoseFacts(spec, default=True, available=folder.pose_spec.kind == "tum", player="ok")
     if pose.available:

@@ -40,11 +40,26 @@ from wallmap.services.odometry.tracker import PoseTracker
 
 Decoder = Callable[[bytes], object]
 _ODD_VALUES: list[Any] = [
-    None, True, -1, 2**64 - 1, -(2**63), math.nan, math.inf, -math.inf, 1e308, "", "x" * 300,
-    b"\x00\xff", [], {}, [1.0] * 1000, {"__nd__": ["<f4", [2**40, 2**40], b""]},
-    {"__nd__": ["<f4", [0, 3], b""]}, {"__nd__": ["|O", [1], b"\x00" * 8]},
+    None,
+    True,
+    -1,
+    2**64 - 1,
+    -(2**63),
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e308,
+    "",
+    "x" * 300,
+    b"\x00\xff",
+    [],
+    {},
+    [1.0] * 1000,
+    {"__nd__": ["<f4", [2**40, 2**40], b""]},
+    {"__nd__": ["<f4", [0, 3], b""]},
+    {"__nd__": ["|O", [1], b"\x00" * 8]},
     {"__nd__": ["<f8", [3, 3], np.full(9, np.nan).tobytes()]},
-]  # fmt: skip
+]
 
 
 @dataclass
@@ -112,8 +127,20 @@ def samples() -> dict[str, tuple[bytes, Decoder]]:
     ends = np.array([2.0, -1.0]), np.array([2.0, 1.0])
     wall = WallObservation(np.array([2.0, 0.1]), cov, *ends, 40, 0.01)
     points = np.random.default_rng(0).normal(size=(2, 8, 3)).astype(np.float32)
-    record = WallRecord(1, 0.0, 2.0, ((1e-4, 0.0), (0.0, 1e-4)), (0.0, 2.0), (4.0, 2.0),
-                        (((0.0, 2.0), (4.0, 2.0)),), 9, 3, False, 0.5, 1.0)  # fmt: skip
+    record = WallRecord(
+        1,
+        0.0,
+        2.0,
+        ((1e-4, 0.0), (0.0, 1e-4)),
+        (0.0, 2.0),
+        (4.0, 2.0),
+        (((0.0, 2.0), (4.0, 2.0)),),
+        9,
+        3,
+        False,
+        0.5,
+        1.0,
+    )
     update = {"v": 1, **MapUpdate(3, 1.0, (record,), (4,)).to_map()}
     reply = {
         "v": 1,

@@ -259,8 +259,9 @@ def _report_partial(config: Config, bag: Path, truth: Truth | None) -> None:
     try:
         _report(config, bag, truth, partial=True)
     except (QueryError, TransportError) as err:
-        print(f"stopped before the mapper had a map to give ({err}): nothing written",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"stopped before the mapper had a map to give ({err}): nothing written", file=sys.stderr
+        )
 
 
 def _report(
@@ -282,14 +283,18 @@ def _report(
         wanted = options.json_out or options.picture or truth is not None
         rooms = fetch_rooms(session, Keys(config.zenoh.prefix)) if wanted else None
     if partial:
-        print(f"stopped before the end of the recording: the map of its first {reply.frames} "
-              "frames")  # fmt: skip
+        print(
+            f"stopped before the end of the recording: the map of its first {reply.frames} frames"
+        )
     print(format_table(reply))
     if reply.frames and not reply.observations:
         nothing = f"no line was seen in any of the {reply.frames} frames"
         why = "nothing in the band the detector reads, or the camera is read wrong"
-        ask = (f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
-               if bag is not None else "(the --sensor topic and its type)")  # fmt: skip
+        ask = (
+            f"(a TUM folder's --intrinsics, --depth-scale): `wallmap doctor {bag}` says more"
+            if bag is not None
+            else "(the --sensor topic and its type)"
+        )
         print(f"wallmap up: {nothing}: {why} {ask}", file=sys.stderr)
     if truth is not None:
         plan, trajectory, seen = truth

@@ -98,9 +98,16 @@ def played(bag: Path, config: Config, pipeline: Pipeline) -> Iterator[Frame]:
             for pose in stream.until(frame.stamp):
                 pipeline.add_pose(pose)
             yield Frame(
-                "offline", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor,
-                sensor, band=frame.band, sweep=frame.sweep,
-            )  # fmt: skip
+                "offline",
+                seq,
+                frame.stamp,
+                frame.frame_id,
+                frame.points,
+                frame.T_base_sensor,
+                sensor,
+                band=frame.band,
+                sweep=frame.sweep,
+            )
 
 
 def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[float, Array]]:

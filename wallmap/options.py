@@ -85,9 +85,13 @@ class Option:
             action = "append" if self.repeat else "store"
             metavar = self.metavar or (None if self.choices else self.key.rsplit(".")[-1].upper())
             parser.add_argument(
-                self.flag, action=action, type=self.kind, metavar=metavar,
-                choices=self.choices, **common,
-            )  # fmt: skip
+                self.flag,
+                action=action,
+                type=self.kind,
+                metavar=metavar,
+                choices=self.choices,
+                **common,
+            )
 
 
 def _lookup(config: Any, key: str) -> Any:
@@ -137,23 +141,44 @@ def given(args: argparse.Namespace, options: Iterable[Option]) -> Tree:
 # --- the flags, by what they configure ----------------------------------------------------------
 
 ZENOH = (
-    Option("--connect", "zenoh.connect", "router endpoint, repeatable; env WALLMAP_CONNECT",
-           metavar="ENDPOINT", repeat=True),
+    Option(
+        "--connect",
+        "zenoh.connect",
+        "router endpoint, repeatable; env WALLMAP_CONNECT",
+        metavar="ENDPOINT",
+        repeat=True,
+    ),
     Option("--prefix", "zenoh.prefix", "key prefix; env WALLMAP_PREFIX", metavar="PREFIX"),
-    Option("--zenoh-config", "zenoh.config_file", "Zenoh json5 config applied first", Path,
-           metavar="FILE"),
-)  # fmt: skip
+    Option(
+        "--zenoh-config",
+        "zenoh.config_file",
+        "Zenoh json5 config applied first",
+        Path,
+        metavar="FILE",
+    ),
+)
 
-ROUTER_JOIN = Option("--connect", "zenoh.connect", "another router to join, repeatable: a "
-                     "mesh, each robot's router joined to the map's (default: none)",
-                     metavar="ENDPOINT", repeat=True, show_default=False)  # fmt: skip
+ROUTER_JOIN = Option(
+    "--connect",
+    "zenoh.connect",
+    "another router to join, repeatable: a "
+    "mesh, each robot's router joined to the map's (default: none)",
+    metavar="ENDPOINT",
+    repeat=True,
+    show_default=False,
+)
 ROUTER_ZENOH = (ROUTER_JOIN, *ZENOH[1:])
 
 HISTORY = (
-    Option("--history", "history.seconds", "seconds of the live streams kept for a service that "
-           "restarts or a link that comes back (at most 512 MB a stream)", positive,
-           metavar="SECONDS"),
-)  # fmt: skip
+    Option(
+        "--history",
+        "history.seconds",
+        "seconds of the live streams kept for a service that "
+        "restarts or a link that comes back (at most 512 MB a stream)",
+        positive,
+        metavar="SECONDS",
+    ),
+)
 
 SPEED = (
     Option("--rate", "player.rate", "speed factor", positive, metavar="X", exclusive="speed"),
@@ -167,117 +192,251 @@ SPEED = (
 )
 
 SOURCE = (
-    Option("--pose-source", "player.source.pose_source", "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
-           "pose[:TOPIC] | tum:FILE | none (not set: tf for a bag, the folder's groundtruth.txt "
-           "for a TUM folder)", metavar="SPEC"),
-    Option("--sensor-topic", "player.source.sensor_topic", "sensor topic, if the bag has several",
-           metavar="TOPIC"),
-    Option("--level", "player.source.level", "auto: level a fixed frame that is not level, and "
-           "find its floor, from the depth data; none: take it as it is, floor at z = 0",
-           choices=("auto", "none")),
-    Option("--floor-z", "player.source.floor_z", "the floor's height in the fixed frame (m)",
-           finite, metavar="Z"),
-    Option("--intrinsics", "player.source.intrinsics", "a TUM folder's camera, pixels",
-           intrinsics, metavar="FX,FY,CX,CY"),
-    Option("--depth-scale", "player.source.depth_scale", "a TUM folder's depth units per metre "
-           "(1000 for millimetres; default: millimetres if its depth.txt or its depths say so, "
-           "else TUM's 5000)", positive, metavar="N"),
-)  # fmt: skip
+    Option(
+        "--pose-source",
+        "player.source.pose_source",
+        "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
+        "pose[:TOPIC] | tum:FILE | none (not set: tf for a bag, the folder's groundtruth.txt "
+        "for a TUM folder)",
+        metavar="SPEC",
+    ),
+    Option(
+        "--sensor-topic",
+        "player.source.sensor_topic",
+        "sensor topic, if the bag has several",
+        metavar="TOPIC",
+    ),
+    Option(
+        "--level",
+        "player.source.level",
+        "auto: level a fixed frame that is not level, and "
+        "find its floor, from the depth data; none: take it as it is, floor at z = 0",
+        choices=("auto", "none"),
+    ),
+    Option(
+        "--floor-z",
+        "player.source.floor_z",
+        "the floor's height in the fixed frame (m)",
+        finite,
+        metavar="Z",
+    ),
+    Option(
+        "--intrinsics",
+        "player.source.intrinsics",
+        "a TUM folder's camera, pixels",
+        intrinsics,
+        metavar="FX,FY,CX,CY",
+    ),
+    Option(
+        "--depth-scale",
+        "player.source.depth_scale",
+        "a TUM folder's depth units per metre "
+        "(1000 for millimetres; default: millimetres if its depth.txt or its depths say so, "
+        "else TUM's 5000)",
+        positive,
+        metavar="N",
+    ),
+)
 
 ROS2_TOPICS = (
-    Option("--namespace", "ros2.namespace", "the bridge's --namespace: topic /T is the key "
-           "NAMESPACE/T (empty: none)", metavar="NS"),
-    Option("--sensor", "ros2.sensor", "the sensor topic and its type: sensor_msgs/msg/Image "
-           "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan (not set: "
-           "the one such topic the bridge or rmw_zenoh announces)", metavar="TOPIC:TYPE"),
-    Option("--rmw-zenoh", "ros2.rmw_zenoh", "read a robot speaking rmw_zenoh in this ROS domain "
-           "(keys DOMAIN/TOPIC/TYPE/HASH), not zenoh-bridge-ros2dds's keys", domain_id,
-           metavar="DOMAIN"),
-    Option("--discover-wait", "ros2.discover_wait", "seconds to wait for the sensor topic to be "
-           "announced (without --sensor)", positive, metavar="S"),
-    Option("--camera-info", "ros2.camera_info", "a depth image's CameraInfo topic (not set: "
-           "camera_info beside the image)", metavar="TOPIC"),
-    Option("--tf-wait", "ros2.tf_wait", "seconds a sensor message waits for its tf, then is "
-           "dropped and counted", positive, metavar="S"),
-)  # fmt: skip
+    Option(
+        "--namespace",
+        "ros2.namespace",
+        "the bridge's --namespace: topic /T is the key NAMESPACE/T (empty: none)",
+        metavar="NS",
+    ),
+    Option(
+        "--sensor",
+        "ros2.sensor",
+        "the sensor topic and its type: sensor_msgs/msg/Image "
+        "(16UC1, 32FC1), sensor_msgs/msg/PointCloud2 or sensor_msgs/msg/LaserScan (not set: "
+        "the one such topic the bridge or rmw_zenoh announces)",
+        metavar="TOPIC:TYPE",
+    ),
+    Option(
+        "--rmw-zenoh",
+        "ros2.rmw_zenoh",
+        "read a robot speaking rmw_zenoh in this ROS domain "
+        "(keys DOMAIN/TOPIC/TYPE/HASH), not zenoh-bridge-ros2dds's keys",
+        domain_id,
+        metavar="DOMAIN",
+    ),
+    Option(
+        "--discover-wait",
+        "ros2.discover_wait",
+        "seconds to wait for the sensor topic to be announced (without --sensor)",
+        positive,
+        metavar="S",
+    ),
+    Option(
+        "--camera-info",
+        "ros2.camera_info",
+        "a depth image's CameraInfo topic (not set: camera_info beside the image)",
+        metavar="TOPIC",
+    ),
+    Option(
+        "--tf-wait",
+        "ros2.tf_wait",
+        "seconds a sensor message waits for its tf, then is dropped and counted",
+        positive,
+        metavar="S",
+    ),
+)
 
 ROS2 = (
     *ROS2_TOPICS,
-    Option("--pose-source", "ros2.pose_source", "tf | tf:PARENT>CHILD | odom[:TOPIC] | "
-           "pose[:TOPIC] | none", metavar="SPEC"),
-    Option("--whole-clouds", "ros2.whole_clouds", "send whole clouds, not only the rows the "
-           "detector asks for", const=True),
-)  # fmt: skip
+    Option(
+        "--pose-source",
+        "ros2.pose_source",
+        "tf | tf:PARENT>CHILD | odom[:TOPIC] | pose[:TOPIC] | none",
+        metavar="SPEC",
+    ),
+    Option(
+        "--whole-clouds",
+        "ros2.whole_clouds",
+        "send whole clouds, not only the rows the detector asks for",
+        const=True,
+    ),
+)
 
 PLAYER = (
     Option("--wait-timeout", "player.wait_timeout", "wait for router and services (s)", positive),
-    Option("--whole-clouds", "player.whole_clouds", "send whole clouds, not only the rows the "
-           "detector asks for (e.g. to record them)", const=True),
+    Option(
+        "--whole-clouds",
+        "player.whole_clouds",
+        "send whole clouds, not only the rows the detector asks for (e.g. to record them)",
+        const=True,
+    ),
     Option("--start", "player.start", "begin S seconds into the bag", non_negative, metavar="S"),
     Option("--duration", "player.duration", "play S seconds of the bag", positive, metavar="S"),
     Option("--loop", "player.loop", "start over at the end, until stopped", const=True),
-    Option("--topics", "player.source.topics", "read only these topics (sensor, tf, poses)",
-           _names, metavar="T1,T2"),
-    Option("--paused", "player.paused", "start paused (resume or step: keys or control)",
-           const=True),
-    Option("--wait-for", "player.wait_for", "services to wait for before playing, comma-separated "
-           "(not set: detector,mapper with --fast, else none); waiting for the mapper also waits "
-           "for it to finish", _names, metavar="SERVICES"),
-)  # fmt: skip
+    Option(
+        "--topics",
+        "player.source.topics",
+        "read only these topics (sensor, tf, poses)",
+        _names,
+        metavar="T1,T2",
+    ),
+    Option(
+        "--paused", "player.paused", "start paused (resume or step: keys or control)", const=True
+    ),
+    Option(
+        "--wait-for",
+        "player.wait_for",
+        "services to wait for before playing, comma-separated "
+        "(not set: detector,mapper with --fast, else none); waiting for the mapper also waits "
+        "for it to finish",
+        _names,
+        metavar="SERVICES",
+    ),
+)
 
 BAND = (
-    Option("--band", "detector.rows.band", "height band, m above the floor (not set: what the "
-           "sensor sees above furniture, at most 1.3-2.1)", band, metavar="LOW,HIGH"),
-)  # fmt: skip
+    Option(
+        "--band",
+        "detector.rows.band",
+        "height band, m above the floor (not set: what the "
+        "sensor sees above furniture, at most 1.3-2.1)",
+        band,
+        metavar="LOW,HIGH",
+    ),
+)
 
 DETECTOR = (
     Option("--rows", "detector.rows.mode", "row choice", choices=("band", "row")),
-    Option("--row-fraction", "detector.rows.row_fraction", "row from the top, for --rows row",
-           float),
+    Option(
+        "--row-fraction", "detector.rows.row_fraction", "row from the top, for --rows row", float
+    ),
     Option("--noise-k", "detector.ransac.noise_k", "depth noise: sigma = k * range^2", float),
     Option("--seed", "detector.seed", "RANSAC seed", int),
-)  # fmt: skip
+)
 
 SLAM = (
-    Option("--slam", "mapper.slam.enabled", "take the poses as odometry and correct them with the "
-           "walls; the corrected pose goes out on {prefix}/pose/corrected, map -> odom on "
-           "{prefix}/pose/correction", const=True),
-)  # fmt: skip
+    Option(
+        "--slam",
+        "mapper.slam.enabled",
+        "take the poses as odometry and correct them with the "
+        "walls; the corrected pose goes out on {prefix}/pose/corrected, map -> odom on "
+        "{prefix}/pose/correction",
+        const=True,
+    ),
+)
 
 POSES = (
-    Option("--trust-poses", "mapper.judge.enabled", "take every pose as it comes: do not judge "
-           "it against the walls (nor estimate its latency)", const=False),
-    Option("--pose-latency", "mapper.judge.latency", "the pose source's latency: its pose of an "
-           "instant is stamped this much later (not set: estimated from the walls)", finite,
-           metavar="SECONDS"),
-)  # fmt: skip
+    Option(
+        "--trust-poses",
+        "mapper.judge.enabled",
+        "take every pose as it comes: do not judge it against the walls (nor estimate its latency)",
+        const=False,
+    ),
+    Option(
+        "--pose-latency",
+        "mapper.judge.latency",
+        "the pose source's latency: its pose of an "
+        "instant is stamped this much later (not set: estimated from the walls)",
+        finite,
+        metavar="SECONDS",
+    ),
+)
 
 STATE = (
     Option("--state", "mapper.state", "keep the map in FILE across restarts", Path, metavar="FILE"),
 )
 
 MAPPER = (
-    Option("--pose-key", "mapper.pose_key", "where poses come from (not set: PREFIX/pose)",
-           metavar="KEYEXPR"),
-    Option("--pose-format", "mapper.pose_format", "wallmap or ros2:TYPE for CDR from a ROS 2 "
-           "system: " + ", ".join(POSE_FORMATS[1:]), choices=POSE_FORMATS, metavar="FORMAT"),
-    Option("--pose-frames", "mapper.pose_frames", "the pose wanted from "
-           "ros2:tf2_msgs/msg/TFMessage", metavar="PARENT>CHILD"),
+    Option(
+        "--pose-key",
+        "mapper.pose_key",
+        "where poses come from (not set: PREFIX/pose)",
+        metavar="KEYEXPR",
+    ),
+    Option(
+        "--pose-format",
+        "mapper.pose_format",
+        "wallmap or ros2:TYPE for CDR from a ROS 2 system: " + ", ".join(POSE_FORMATS[1:]),
+        choices=POSE_FORMATS,
+        metavar="FORMAT",
+    ),
+    Option(
+        "--pose-frames",
+        "mapper.pose_frames",
+        "the pose wanted from ros2:tf2_msgs/msg/TFMessage",
+        metavar="PARENT>CHILD",
+    ),
     Option("--pose-wait", "mapper.pose_wait", "max wait for a pose (s)", positive),
-    Option("--ros2-out", "mapper.ros2_out", "publish the map as ROS 2 messages on {prefix}/markers "
-           "(MarkerArray) and {prefix}/trajectory (Path), CDR, for RViz through "
-           "zenoh-bridge-ros2dds", negatable=True),
-    Option("--gap-wait", "mapper.gap_wait", "how long a frame waits for the earlier ones of its "
-           "run to come back from history before they are given up as lost", positive,
-           metavar="SECONDS"),
-)  # fmt: skip
+    Option(
+        "--ros2-out",
+        "mapper.ros2_out",
+        "publish the map as ROS 2 messages on {prefix}/markers "
+        "(MarkerArray) and {prefix}/trajectory (Path), CDR, for RViz through "
+        "zenoh-bridge-ros2dds",
+        negatable=True,
+    ),
+    Option(
+        "--gap-wait",
+        "mapper.gap_wait",
+        "how long a frame waits for the earlier ones of its "
+        "run to come back from history before they are given up as lost",
+        positive,
+        metavar="SECONDS",
+    ),
+)
 
 ODOMETRY = (
-    Option("--initial-pose", "odometry.initial_pose", "where the first scan was taken, in the map "
-           "frame", planar_pose, metavar="X,Y,YAW"),
-    Option("--no-walls", "odometry.use_walls", "do not refine poses against the mapped walls",
-           const=False),
-)  # fmt: skip
+    Option(
+        "--initial-pose",
+        "odometry.initial_pose",
+        "where the first scan was taken, in the map frame",
+        planar_pose,
+        metavar="X,Y,YAW",
+    ),
+    Option(
+        "--no-walls",
+        "odometry.use_walls",
+        "do not refine poses against the mapped walls",
+        const=False,
+    ),
+)
 
 UP = (
     Option("--exit-when-done", "up.exit_when_done", "stop everything after the bag", const=True),
@@ -285,11 +444,20 @@ UP = (
     Option("--picture", "up.picture", "draw the final map (.png or .svg)", picture, metavar="FILE"),
     Option("--min-obs", "up.min_obs", "walls printed: seen N times", int, metavar="N"),
     Option("--truth", "up.truth", "score the map against a scene's truth", Path, metavar="FILE"),
-    Option("--odometry", "up.odometry", "estimate the poses from the scans (wallmap odometry), "
-           "for bags without poses", const=True),
-    Option("--ros2", "up.ros2", "map a live ROS 2 robot (wallmap ros2: --sensor, --namespace...) "
-           "instead of a BAG, until Ctrl-C", const=True),
-)  # fmt: skip
+    Option(
+        "--odometry",
+        "up.odometry",
+        "estimate the poses from the scans (wallmap odometry), for bags without poses",
+        const=True,
+    ),
+    Option(
+        "--ros2",
+        "up.ros2",
+        "map a live ROS 2 robot (wallmap ros2: --sensor, --namespace...) "
+        "instead of a BAG, until Ctrl-C",
+        const=True,
+    ),
+)
 
 VIEW = (
     Option("--port", "view.port", "HTTP port", port),

@@ -68,8 +68,10 @@ def format_status(services: list[dict[str, Any]], prefix: str) -> str:
             lines.append(f"{'':<{width}}  {'':>8}  {describe_pose_source(entry['pose_source'])}")
         for key, seen in dict(entry.get("topics") or {}).items():  # a live source's topics
             last = "never" if seen["last_s"] is None else f"last {seen['last_s']} s ago"
-            lines.append(f"{'':<{width}}  {'':>8}  {key}: {seen['messages']} messages, "
-                         f"{seen['hz']} Hz, {last}")  # fmt: skip
+            lines.append(
+                f"{'':<{width}}  {'':>8}  {key}: {seen['messages']} messages, "
+                f"{seen['hz']} Hz, {last}"
+            )
         for problem in entry.get("missing") or ():
             lines.append(f"{'':<{width}}  {'':>8}  missing: {problem}")
     return "\n".join(lines)

@@ -57,11 +57,14 @@ def run(
         publisher = declare_history_publisher(session, keys.observations, history.samples())
         diagnostics = session.declare_publisher(keys.detector_diagnostics)
         frames = subscribe_with_history(
-            session, keys.frames, history,
+            session,
+            keys.frames,
+            history,
             lambda channel: _work(channel, detector, publisher, diagnostics, stats, history),
-            lambda n: stats.note("missed", "missed", f"{n} frames lost for good "
-                                 "(past the history window)", n=n),
-        )  # fmt: skip
+            lambda n: stats.note(
+                "missed", "missed", f"{n} frames lost for good (past the history window)", n=n
+            ),
+        )
         rows = session.declare_queryable(keys.detector_rows)
         token = Presence(session, keys, "detector", stats)
         answers = threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True)
@@ -100,8 +103,18 @@ def _work(
 
     def skipped(frames: list[Frame]) -> None:  # the mapper need not wait for them
         for frame in frames:
-            publisher.put(pack(Observations(frame.run, frame.seq, frame.stamp, "base_link",
-                                            lossless=frame.lossless, skipped=True)))  # fmt: skip
+            publisher.put(
+                pack(
+                    Observations(
+                        frame.run,
+                        frame.seq,
+                        frame.stamp,
+                        "base_link",
+                        lossless=frame.lossless,
+                        skipped=True,
+                    )
+                )
+            )
 
     for frame in frames_in_turn(channel, stats, history, skipped):
         report = RowReport()

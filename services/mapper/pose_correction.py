@@ -177,9 +177,14 @@ class PoseCorrector:
         slot = len(self.ids)
         window = slam_ekf.wall_slice(slot)
         wall = wall_map.add_wall(
-            obs, self.x[window].copy(), self.p[window, window].copy(), anchor, pose, stamp,
+            obs,
+            self.x[window].copy(),
+            self.p[window, window].copy(),
+            anchor,
+            pose,
+            stamp,
             depth=depth,
-        )  # fmt: skip
+        )
         self.ids.append(wall.id)
         self.seen.append(self.frame)
 

@@ -94,10 +94,18 @@ class JudgeConfig:
 
     def __post_init__(self) -> None:
         if self.latency is not None:
-            require(abs(self.latency) <= MAX_LATENCY, "latency", f"within +-{MAX_LATENCY} s",
-                    self.latency)  # fmt: skip
-        require(0 < self.max_latency <= MAX_LATENCY, "max_latency", f"0-{MAX_LATENCY} s",
-                self.max_latency)  # fmt: skip
+            require(
+                abs(self.latency) <= MAX_LATENCY,
+                "latency",
+                f"within +-{MAX_LATENCY} s",
+                self.latency,
+            )
+        require(
+            0 < self.max_latency <= MAX_LATENCY,
+            "max_latency",
+            f"0-{MAX_LATENCY} s",
+            self.max_latency,
+        )
         require(self.latency_sd > 0, "latency_sd", "positive", self.latency_sd)
         require(self.offset_time > 0, "offset_time", "positive", self.offset_time)
         require(self.min_obs >= 1, "min_obs", ">= 1", self.min_obs)

@@ -115,8 +115,9 @@ def associate(
     if not best:
         return _no_pairs(), []
     keep = np.array([best[i] for i in sorted(best)])
-    pairs = pose_fit.Pairs(found.z[keep], found.r[keep], found.s[keep], found.anchor[keep],
-                           found.p[keep])  # fmt: skip
+    pairs = pose_fit.Pairs(
+        found.z[keep], found.r[keep], found.s[keep], found.anchor[keep], found.p[keep]
+    )
     return pairs, [(int(found.obs[k]), found.walls[k]) for k in keep]
 
 

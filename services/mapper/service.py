@@ -28,6 +28,7 @@ from wallmap.common.config_file import require
 from wallmap.common.delivery import (
     ACK_EVERY,
     History,
+    HistorySubscription,
     InOrder,
     RunProgress,
     subscribe_with_history,
@@ -198,7 +199,6 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     core = _restore(mapper, stats, log)
-    pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
@@ -206,18 +206,10 @@ def run(
         updates = session.declare_publisher(keys.map_updates)
         corrected = _CorrectedPoses(session, keys, log) if core.corrector is not None else None
         ros2 = Ros2Outlet(session, keys) if mapper.ros2_out else None
-        # With history: a mapper restarted on its state file takes what it missed meanwhile.
-        poses = subscribe_with_history(
-            session, pose_key, history,
-            lambda channel: _poses(channel, core, pose_input), _missed(stats, "poses"),
-        )  # fmt: skip
-        observations = subscribe_with_history(
-            session, keys.observations, history,
-            lambda channel: _observations(
-                channel, core, progress, mapper.pose_wait, mapper.gap_wait, corrected
-            ),
-            _missed(stats, "observations"),
-        )  # fmt: skip
+        observe = (progress, mapper.pose_wait, mapper.gap_wait, corrected)
+        poses, observations = _subscribe(
+            session, (pose_key, keys.observations), history, core, mapper, observe
+        )
         queryable = session.declare_queryable(keys.map_walls)
         rooms = RoomsServer(session, keys, core.lock, core.mapping, stats, mapper.ros2_out)
         workers = [
@@ -246,6 +238,38 @@ def run(
     return stats
 
 
+def _subscribe(
+    session: zenoh.Session,
+    keys: tuple[str, str],
+    history: History,
+    core: MapperCore,
+    mapper: MapperSettings,
+    observe: tuple[zenoh.Publisher, float, float, _CorrectedPoses | None],
+) -> tuple[HistorySubscription, HistorySubscription]:
+    """The poses and the observations, each with history.
+
+    A mapper restarted on its state file takes what it missed meanwhile. ``observe``: the rest
+    of what ``_observations`` takes.
+    """
+    pose_key, observation_key = keys
+    pose_input = make_pose_input(mapper.pose_format, mapper.pose_frames)
+    poses = subscribe_with_history(
+        session,
+        pose_key,
+        history,
+        lambda channel: _poses(channel, core, pose_input),
+        _missed(core.stats, "poses"),
+    )
+    observations = subscribe_with_history(
+        session,
+        observation_key,
+        history,
+        lambda channel: _observations(channel, core, *observe),
+        _missed(core.stats, "observations"),
+    )
+    return poses, observations
+
+
 def _details(core: MapperCore) -> dict[str, Any]:
     """What ``wallmap status`` shows of the mapper beyond its counters (no lock: a snapshot)."""
     return {"pose_source": core.pose_source} if core.judge is not None else {}
@@ -269,9 +293,12 @@ def _restore(mapper: MapperSettings, stats: Stats, log: logging.Logger) -> Mappe
         corrector.check(wall_map)
     judge = _judge(mapper) if corrector is None else None
     mapping = Mapping(
-        judge=mapper.judge, wall_map=wall_map, corrector=corrector, judged=judge,
+        judge=mapper.judge,
+        wall_map=wall_map,
+        corrector=corrector,
+        judged=judge,
         poses=PoseBuffer(mapper.poses),
-    )  # fmt: skip
+    )
     saved_rooms = state_file.load_entry(mapper.state, "rooms") if mapper.state else None
     if saved_rooms is not None:
         try:
@@ -286,16 +313,24 @@ def _corrector(mapper: MapperSettings) -> PoseCorrector | None:
     """The pose correction of ``--slam``, from the state file when it has one."""
     if not mapper.slam.enabled:
         return None
-    return _restored(mapper, "slam", lambda: PoseCorrector(mapper.slam),
-                     lambda saved: PoseCorrector.from_json(saved, mapper.slam))  # fmt: skip
+    return _restored(
+        mapper,
+        "slam",
+        lambda: PoseCorrector(mapper.slam),
+        lambda saved: PoseCorrector.from_json(saved, mapper.slam),
+    )
 
 
 def _judge(mapper: MapperSettings) -> PoseJudge | None:
     """The pose judge, from the state file when it has one (what it learnt of the source)."""
     if not mapper.judge.enabled:
         return None
-    return _restored(mapper, "poses", lambda: PoseJudge(mapper.judge),
-                     lambda saved: PoseJudge.from_json(saved, mapper.judge))  # fmt: skip
+    return _restored(
+        mapper,
+        "poses",
+        lambda: PoseJudge(mapper.judge),
+        lambda saved: PoseJudge.from_json(saved, mapper.judge),
+    )
 
 
 def _restored(
@@ -500,9 +535,12 @@ class _Waiting:
                 self.core.progress.again(again.run)
         if taken.lost:
             self.core.stats.note(
-                "lost", "lost", f"gave up {taken.lost} frames that never came (past the history "
-                "window, or a service was down longer)", n=taken.lost,
-            )  # fmt: skip
+                "lost",
+                "lost",
+                f"gave up {taken.lost} frames that never came (past the history "
+                "window, or a service was down longer)",
+                n=taken.lost,
+            )
         for ready in taken.ready:
             self._queue(ready)
 

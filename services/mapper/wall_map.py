@@ -40,8 +40,9 @@ def _segment_in_map(obs: WallObservation, pose: Array) -> Array:
     x, y, yaw = pose.tolist()
     c, s = math.cos(yaw), math.sin(yaw)
     (ax, ay), (bx, by) = obs.p0.tolist(), obs.p1.tolist()
-    return np.array([[x + c * ax - s * ay, y + s * ax + c * ay],
-                     [x + c * bx - s * by, y + s * bx + c * by]])  # fmt: skip
+    return np.array(
+        [[x + c * ax - s * ay, y + s * ax + c * ay], [x + c * bx - s * by, y + s * bx + c * by]]
+    )
 
 
 def _moved(a: Array, b: Array, distance: float, angle: float) -> bool:
@@ -370,9 +371,19 @@ class WallMap:
         seg = _segment_in_map(obs, pose)
         extent = Extent(anchor + s, wall_model.direction(s))
         wall = Wall(
-            self.next_id, s, p, anchor, seg.copy(), extent, 1, stamp, stamp, 1, pose.copy(),
+            self.next_id,
+            s,
+            p,
+            anchor,
+            seg.copy(),
+            extent,
+            1,
+            stamp,
+            stamp,
+            1,
+            pose.copy(),
             int(depth),
-        )  # fmt: skip
+        )
         wall.extend(seg)  # puts the end points on the line
         extent.add(seg)
         self.restore(wall)

@@ -151,8 +151,11 @@ class BagFrames(ClosingSource):
                 pose, mount = self.placement.place(self.pose_at(stamp), mount)
                 points, stacked = hand_out(  # a LaserScan has no height: it is one row
                     lambda rows_read, m=msg: self._decode(m, rows_read),
-                    getattr(msg, "height", 1), rows, mount, self.placement.band,
-                )  # fmt: skip
+                    getattr(msg, "height", 1),
+                    rows,
+                    mount,
+                    self.placement.band,
+                )
                 if points.base is not None or points.dtype != np.float32:  # not ours to change
                     points = np.array(points, dtype=np.float32)
                 points = invalid_to_nan(points)

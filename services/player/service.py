@@ -201,9 +201,16 @@ class _Outlet:
     """
 
     def __init__(
-        self, session: zenoh.Session, keys: Keys, run_id: str, sensor: str, playback: Playback,
-        bag: FrameSource, history: History, speed: float,
-    ) -> None:  # fmt: skip
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        run_id: str,
+        sensor: str,
+        playback: Playback,
+        bag: FrameSource,
+        history: History,
+        speed: float,
+    ) -> None:
         rate = bag.frame_count / bag.duration if bag.duration > 0 else MAX_RATE
         self._rate = min(rate * (1.0 if playback.fast else speed), MAX_RATE * 8)
         self._session, self._keys, self._history = session, keys, history
@@ -217,9 +224,12 @@ class _Outlet:
         self.published = self.poses = 0
         self.bar = _ProgressLine(bag.frame_count)
         self.state: dict[str, Any] = {
-            "run": run_id, "published": 0, "frames": bag.frame_count,
-            "duration": bag.duration, "bag": str(bag.path),
-        }  # fmt: skip
+            "run": run_id,
+            "published": 0,
+            "frames": bag.frame_count,
+            "duration": bag.duration,
+            "bag": str(bag.path),
+        }
         self._last_progress = 0.0
 
     def send(self, frame: SensorFrame) -> None:
@@ -232,10 +242,18 @@ class _Outlet:
             self.poses += 1
         message = pack(
             Frame(
-                self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-                frame.T_base_sensor, self._sensor, self.lossless, frame.band, frame.sweep,
+                self._run,
+                self.published,
+                frame.stamp,
+                frame.frame_id,
+                frame.points,
+                frame.T_base_sensor,
+                self._sensor,
+                self.lossless,
+                frame.band,
+                frame.sweep,
             )
-        )  # fmt: skip
+        )
         if self._frames is None:
             samples = self._history.samples(self._rate, len(message))
             self._frames = declare_history_publisher(self._session, self._keys.frames, samples)
@@ -311,8 +329,12 @@ def _check_and_describe(
         log.warning("%s", warning)
     log.info(
         "%s: %d frames on %s (%s), poses from %s",
-        recording, bag.frame_count, bag.sensor_topic, bag.sensor_type, bag.pose_spec,
-    )  # fmt: skip
+        recording,
+        bag.frame_count,
+        bag.sensor_topic,
+        bag.sensor_type,
+        bag.pose_spec,
+    )
     if placed := bag.placement.describe():
         log.info("%s", placed)
 

@@ -181,8 +181,9 @@ class TumFolder(ClosingSource):
         if self._track is None:
             self.placement = unlevelled(self.base_frame)
         else:
-            self.placement = survey(list(self.samples()), self.base_frame, mode=level,
-                                    floor_z=floor_z)  # fmt: skip
+            self.placement = survey(
+                list(self.samples()), self.base_frame, mode=level, floor_z=floor_z
+            )
 
     def pose_at(self, stamp: float) -> Pose | None:
         """The camera's 6-DoF pose at a stamp, or None where the trajectory does not cover it."""
@@ -231,12 +232,19 @@ class TumFolder(ClosingSource):
             pose, mount = self.placement.place(self.pose_at(stamp), np.eye(4))
             points, stacked = hand_out(
                 lambda rows_read, i=index: self._points(i, rows_read),
-                self.size[0], rows, mount, self.placement.band,
-            )  # fmt: skip
+                self.size[0],
+                rows,
+                mount,
+                self.placement.band,
+            )
             frame = SensorFrame(
-                stamp, OPTICAL_FRAME, np.ascontiguousarray(points, dtype=np.float32), mount,
-                offset, stacked,
-            )  # fmt: skip
+                stamp,
+                OPTICAL_FRAME,
+                np.ascontiguousarray(points, dtype=np.float32),
+                mount,
+                offset,
+                stacked,
+            )
             yield frame, pose
 
     @property

@@ -112,8 +112,10 @@ def discover_sensor(session: zenoh.Session, ros2: Ros2Settings, stop: threading.
             return sensor
         if time.monotonic() >= deadline or stop.wait(RETRY):
             seen = ", ".join(a.sensor() for a in sorted(set(announced))) or "no topic at all"
-            raise PlayerError(f"no sensor topic {where} within {ros2.discover_wait:g} s "
-                              f"(seen: {seen}); give --sensor TOPIC:TYPE")  # fmt: skip
+            raise PlayerError(
+                f"no sensor topic {where} within {ros2.discover_wait:g} s "
+                f"(seen: {seen}); give --sensor TOPIC:TYPE"
+            )
 
 
 def _where(ros2: Ros2Settings) -> str:

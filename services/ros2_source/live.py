@@ -122,8 +122,11 @@ class LiveFrames:
         pose = pose_from_message(msg, 0, self.base_frame)
         self._see(pose.stamp)
         if pose.child != self.base_frame:
-            self.report("pose_source_changed", f"the robot frame is {pose.child!r} (was "
-                        f"{self.base_frame!r}): the pose messages' child_frame_id")  # fmt: skip
+            self.report(
+                "pose_source_changed",
+                f"the robot frame is {pose.child!r} (was "
+                f"{self.base_frame!r}): the pose messages' child_frame_id",
+            )
             self._robot_frame(pose.child)
         self._recent.append(pose)
         self._emit(pose)
@@ -156,8 +159,10 @@ class LiveFrames:
             posed = self._posed(waiting)
             if posed is None and self.newest - waiting.stamp > self.tf_wait:
                 if self._without_intrinsics():
-                    self.report("no_camera_info", f"an image dropped after {self.tf_wait:g} s "
-                                "without a CameraInfo")  # fmt: skip
+                    self.report(
+                        "no_camera_info",
+                        f"an image dropped after {self.tf_wait:g} s without a CameraInfo",
+                    )
                     continue
                 posed = self._posed(waiting) if self._follow_the_sensor(waiting) else None
                 if posed is None:
@@ -188,8 +193,9 @@ class LiveFrames:
         """A depth image cannot be read yet: its CameraInfo (sent beside it) has not come."""
         return self.sensor_type == IMAGE and self.camera_info is None
 
-    def _hold(self, survey: LiveSurvey, waiting: _Waiting, pose: Pose | None,
-              mount: np.ndarray) -> None:  # fmt: skip
+    def _hold(
+        self, survey: LiveSurvey, waiting: _Waiting, pose: Pose | None, mount: np.ndarray
+    ) -> None:
         """A frame held for the survey, its points (some rows) surveyed."""
         read, height = self._reader(waiting.message)
         survey.add(waiting.stamp, read(survey_rows(height)), pose, mount, waiting.frame_id)
@@ -198,8 +204,11 @@ class LiveFrames:
     def _end_survey(self, survey: LiveSurvey) -> list[SensorFrame]:
         """The placement the survey finds; the held poses and frames, placed by it."""
         self._placement, self._survey = survey.placement(self.base_frame), None
-        self.report("surveyed", f"surveyed {len(self._held)} frames: "
-                    f"{self._placement.describe() or 'nothing to level'}")  # fmt: skip
+        self.report(
+            "surveyed",
+            f"surveyed {len(self._held)} frames: "
+            f"{self._placement.describe() or 'nothing to level'}",
+        )
         for pose in self._held_poses:
             self._emit(pose)
         frames = [self._placed(*held) for held in self._held]
@@ -249,8 +258,11 @@ class LiveFrames:
     def _see(self, stamp: float) -> None:
         """The robot's time moved on; far back is a new session."""
         if stamp < self.newest - CLOCK_JUMP:
-            self.report("restarts", f"the robot's clock went back {self.newest - stamp:.1f} s: "
-                        "a new session, started over")  # fmt: skip
+            self.report(
+                "restarts",
+                f"the robot's clock went back {self.newest - stamp:.1f} s: "
+                "a new session, started over",
+            )
             self.tf = TfBuffer()
             for msg in self._statics.values():
                 self.tf.add_message(msg, static=True)
@@ -289,8 +301,9 @@ class LiveFrames:
         mount = self._placement.place(pose, mount)[1]
         read, height = self._reader(waiting.message)
         points, band = hand_out(read, height, self.rows, mount, self._placement.band)
-        return SensorFrame(waiting.stamp, waiting.frame_id, invalid_to_nan(np.array(points)),
-                           mount, band=band)  # fmt: skip
+        return SensorFrame(
+            waiting.stamp, waiting.frame_id, invalid_to_nan(np.array(points)), mount, band=band
+        )
 
     def _reader(self, msg: Any) -> tuple[Callable[[slice], np.ndarray], int]:
         if self.sensor_type == POINTCLOUD2:

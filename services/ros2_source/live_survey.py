@@ -33,8 +33,14 @@ class LiveSurvey:
     samples: list[Sample] = field(default_factory=list)
     _first: float | None = None
 
-    def add(self, stamp: float, points: np.ndarray, pose: Pose | None, mount: np.ndarray,
-            sensor_frame: str) -> None:  # fmt: skip
+    def add(
+        self,
+        stamp: float,
+        points: np.ndarray,
+        pose: Pose | None,
+        mount: np.ndarray,
+        sensor_frame: str,
+    ) -> None:
         """A held frame (the first starts the clock); one without a pose is not surveyed."""
         self._first = stamp if self._first is None else min(self._first, stamp)
         if pose is not None:

@@ -75,8 +75,10 @@ def _subscriptions(ros2: Ros2Settings) -> dict[str, tuple[str, str]]:
     if (pose_topic := ros2.pose_topic()) is not None:
         kind = ros2.pose_spec().kind
         found["pose"] = (pose_topic, ODOMETRY_TYPE if kind == "odom" else "")
-    return {kind: (ros2.key(topic, msgtype or None), msgtype)
-            for kind, (topic, msgtype) in found.items()}  # fmt: skip
+    return {
+        kind: (ros2.key(topic, msgtype or None), msgtype)
+        for kind, (topic, msgtype) in found.items()
+    }
 
 
 def _subscribe(session: zenoh.Session, kind: str, key: str, intake: _Intake) -> Any:
@@ -102,17 +104,26 @@ def run(
         subscriptions = _subscriptions(ros2)
         _, msgtype = ros2.sensor_topic_type()
         rows = None if ros2.whole_clouds or msgtype == LASERSCAN else ask_rows(session, keys)
-        live = LiveFrames(msgtype, spec, spec.child, ros2.tf_wait, rows,
-                          lambda counter, line: stats.note(counter, counter, line))  # fmt: skip
+        live = LiveFrames(
+            msgtype,
+            spec,
+            spec.child,
+            ros2.tf_wait,
+            rows,
+            lambda counter, line: stats.note(counter, counter, line),
+        )
         intake = _Intake(stats)
         watch = TopicWatch({kind: key for kind, (key, _) in subscriptions.items()})
-        subscribers = [_subscribe(session, kind, key, intake)
-                       for kind, (key, _) in subscriptions.items()]  # fmt: skip
+        subscribers = [
+            _subscribe(session, kind, key, intake) for kind, (key, _) in subscriptions.items()
+        ]
         outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
-        presence = Presence(session, keys, "ros2", stats,
-                            lambda: {"run": run_id, **watch.report(time.monotonic())})  # fmt: skip
-        worker = threading.Thread(target=_work, args=(intake, live, subscriptions, outlet, stats,
-                                                      watch, stop))  # fmt: skip
+        presence = Presence(
+            session, keys, "ros2", stats, lambda: {"run": run_id, **watch.report(time.monotonic())}
+        )
+        worker = threading.Thread(
+            target=_work, args=(intake, live, subscriptions, outlet, stats, watch, stop)
+        )
         worker.start()  # before the query: the queue it drains may fill meanwhile
         # an old bridge's cache (later ones and rmw_zenoh's: the advanced subscriber's history)
         for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):
@@ -215,10 +226,20 @@ class _Outlet:
             self._poses.put(pack(pose))
 
     def frame(self, frame: Any) -> None:
-        message = pack(Frame(
-            self._run, self.published, frame.stamp, frame.frame_id, frame.points,
-            frame.T_base_sensor, self._sensor, False, frame.band, frame.sweep,
-        ))  # fmt: skip
+        message = pack(
+            Frame(
+                self._run,
+                self.published,
+                frame.stamp,
+                frame.frame_id,
+                frame.points,
+                frame.T_base_sensor,
+                self._sensor,
+                False,
+                frame.band,
+                frame.sweep,
+            )
+        )
         if self._frames is None:
             samples = self._history.samples(MAX_RATE, len(message))
             self._frames = declare_history_publisher(self._session, self._keys.frames, samples)

@@ -49,10 +49,18 @@ class Ros2Settings:
         if not self.sensor:
             object.__setattr__(self, "sensor", None)
         require(0 < self.tf_wait < math.inf, "tf_wait", "a positive number", self.tf_wait)
-        require(0 < self.discover_wait < math.inf, "discover_wait", "a positive number",
-                self.discover_wait)  # fmt: skip
-        require(self.rmw_zenoh is None or 0 <= self.rmw_zenoh <= MAX_DOMAIN, "rmw_zenoh",
-                f"a ROS domain id, 0-{MAX_DOMAIN}", self.rmw_zenoh)  # fmt: skip
+        require(
+            0 < self.discover_wait < math.inf,
+            "discover_wait",
+            "a positive number",
+            self.discover_wait,
+        )
+        require(
+            self.rmw_zenoh is None or 0 <= self.rmw_zenoh <= MAX_DOMAIN,
+            "rmw_zenoh",
+            f"a ROS domain id, 0-{MAX_DOMAIN}",
+            self.rmw_zenoh,
+        )
         if self.sensor is not None:
             self.sensor_topic_type()  # raises on a bad value
         self.pose_spec()
@@ -62,8 +70,10 @@ class Ros2Settings:
         topic, _, msgtype = (self.sensor or "").rpartition(":")
         topic = topic.strip("/")
         if not topic or msgtype not in LIVE_TYPES:
-            raise PlayerError(f"--sensor must be TOPIC:TYPE with TYPE one of "
-                              f"{', '.join(LIVE_TYPES)}; got {self.sensor!r}")  # fmt: skip
+            raise PlayerError(
+                f"--sensor must be TOPIC:TYPE with TYPE one of "
+                f"{', '.join(LIVE_TYPES)}; got {self.sensor!r}"
+            )
         return topic, msgtype
 
     def pose_spec(self) -> PoseSourceSpec:

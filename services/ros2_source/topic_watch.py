@@ -42,8 +42,11 @@ class TopicWatch:
             times = self._times[kind]
             recent = sum(1 for t in times if now - t <= RATE_WINDOW)
             last = now - times[-1] if times else None
-            topics[key] = {"messages": self._count[kind], "hz": round(recent / RATE_WINDOW, 1),
-                           "last_s": None if last is None else round(last, 1)}  # fmt: skip
+            topics[key] = {
+                "messages": self._count[kind],
+                "hz": round(recent / RATE_WINDOW, 1),
+                "last_s": None if last is None else round(last, 1),
+            }
             if last is None:
                 missing.append(f"{key}: nothing heard")
             elif last > SILENT and kind != "tf_static":  # a static transform is sent once

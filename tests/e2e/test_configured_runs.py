@@ -65,9 +65,17 @@ def test_up_with_a_file_is_the_run_with_its_flags_and_writes_it_out(scene, tmp_p
     for name, how in (("flags", flags), ("file", ("--config", str(file)))):
         out[name] = tmp_path / f"{name}.json"
         run_wallmap(
-            "up", str(scene), "--fast", "--exit-when-done", "--json-out", str(out[name]), *how,
-            "--connect", f"tcp/127.0.0.1:{free_port()}", timeout=240,
-        )  # fmt: skip
+            "up",
+            str(scene),
+            "--fast",
+            "--exit-when-done",
+            "--json-out",
+            str(out[name]),
+            *how,
+            "--connect",
+            f"tcp/127.0.0.1:{free_port()}",
+            timeout=240,
+        )
     by_flags, by_file = (json.loads(out[n].read_text()) for n in ("flags", "file"))
     assert by_flags["walls"] == by_file["walls"]
     assert by_flags["frames"] == by_file["frames"] > 0
@@ -84,8 +92,15 @@ def test_up_with_a_file_is_the_run_with_its_flags_and_writes_it_out(scene, tmp_p
 @pytest.mark.e2e
 def test_the_state_file_says_how_its_map_was_made(stack, scene, tmp_path) -> None:
     state = tmp_path / "map.json"
-    mapper = stack.start("mapper", "mapper", "--state", str(state), "--set",
-                         "mapper.map.merge_gap=2.5", *stack.zenoh_args)  # fmt: skip
+    mapper = stack.start(
+        "mapper",
+        "mapper",
+        "--state",
+        str(state),
+        "--set",
+        "mapper.map.merge_gap=2.5",
+        *stack.zenoh_args,
+    )
     stack.start("detector", "detector", *stack.zenoh_args)
     assert stack.run("player", str(scene), "--fast", *stack.zenoh_args).returncode == 0
     assert mapper.stop() == 0

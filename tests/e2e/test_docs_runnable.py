@@ -77,8 +77,11 @@ def _processes_in_group(group: int) -> list[str]:
     """The command lines of the processes in a process group (what a page left running)."""
     ps = ["ps", "-e", "-o", "pgid=,args="]
     listed = subprocess.run(ps, capture_output=True, text=True, check=False).stdout
-    return [line.split(None, 1)[1] for line in listed.splitlines()
-            if line.split() and line.split()[0] == str(group)]  # fmt: skip
+    return [
+        line.split(None, 1)[1]
+        for line in listed.splitlines()
+        if line.split() and line.split()[0] == str(group)
+    ]
 
 
 def _default_endpoint_free() -> bool:
@@ -103,16 +106,24 @@ def test_a_page_s_runnable_blocks_run_as_written(name: str, my_bag: Path, tmp_pa
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     log = tmp_path / "page.log"
     with log.open("wb") as out:
-        shell = subprocess.Popen(["bash", str(script)], cwd=tmp_path, env=env, stdout=out,
-                                 stderr=subprocess.STDOUT, start_new_session=True)  # fmt: skip
+        shell = subprocess.Popen(
+            ["bash", str(script)],
+            cwd=tmp_path,
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         try:
             code = shell.wait(timeout=TIMEOUT)
         except subprocess.TimeoutExpired:
             left = _processes_in_group(shell.pid)
             os.killpg(shell.pid, signal.SIGKILL)
             shell.wait()
-            pytest.fail(f"{name}'s blocks did not end in {TIMEOUT} s; still running: {left}\n"
-                        f"{log.read_text()[-4000:]}")  # fmt: skip
+            pytest.fail(
+                f"{name}'s blocks did not end in {TIMEOUT} s; still running: {left}\n"
+                f"{log.read_text()[-4000:]}"
+            )
     output = log.read_text(errors="replace")
     assert_clean_exit(f"{name}'s runnable blocks", code, output)
     files, said = MADE[name]

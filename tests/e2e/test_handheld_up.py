@@ -21,10 +21,20 @@ def test_up_plays_a_tum_folder_through_the_services(handheld_recordings, tmp_pat
     out = tmp_path / "map.json"
     fx, fy, cx, cy = TUM.player.source.intrinsics
     done = run_wallmap(
-        "up", str(info.path), "--fast", "--exit-when-done", "--json-out", str(out),
-        "--intrinsics", f"{fx},{fy},{cx},{cy}", "--depth-scale", "1000",
-        "--connect", f"tcp/127.0.0.1:{free_port()}", timeout=240,
-    )  # fmt: skip
+        "up",
+        str(info.path),
+        "--fast",
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        "--intrinsics",
+        f"{fx},{fy},{cx},{cy}",
+        "--depth-scale",
+        "1000",
+        "--connect",
+        f"tcp/127.0.0.1:{free_port()}",
+        timeout=240,
+    )
     reply = json.loads(out.read_text())
     assert reply["frames"] == info.n_frames
     assert score(info, reply["walls"]).recall >= 0.9

@@ -38,9 +38,16 @@ def _up(bag: Path, out: Path, *flags: str, timeout: float = 180.0) -> dict:
     """``wallmap up`` to the end of the bag: its map reply, the run checked clean."""
     port = free_port()
     done = run_wallmap(
-        "up", str(bag), "--exit-when-done", "--json-out", str(out),
-        "--connect", f"tcp/127.0.0.1:{port}", *flags, timeout=timeout,
-    )  # fmt: skip
+        "up",
+        str(bag),
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        "--connect",
+        f"tcp/127.0.0.1:{port}",
+        *flags,
+        timeout=timeout,
+    )
     assert "error" not in done.stderr.lower(), done.stderr
     return json.loads(out.read_text())
 
@@ -74,8 +81,10 @@ def test_the_jackal_arena_maps_as_six_walls(tmp_path: Path, label: str, flags) -
     walls = [MappedWall.from_reply(w) for w in reply["walls"]]
     explained = _explained(reply, bag)
     scans = sum(1 for _ in scan_rows(bag))
-    print(f"\n{label}: {len(walls)} walls, {len(fans(walls))} fans, {explained:.1%} of the scan "
-          f"points within 5 cm; {reply.get('pose_source')}")  # fmt: skip
+    print(
+        f"\n{label}: {len(walls)} walls, {len(fans(walls))} fans, {explained:.1%} of the scan "
+        f"points within 5 cm; {reply.get('pose_source')}"
+    )
     assert reply["frames"] == scans, "every frame integrated"
     assert reply["dropped"] == 0
     assert len(walls) <= 8
@@ -111,15 +120,25 @@ def _area_walled(walls: list[dict]) -> float:
 
 def test_a_late_noisy_glitching_tum_file_still_maps_the_scene(tmp_path: Path) -> None:
     """The held-back case's kind: 80 ms late, 0.5 deg noise, 3 s 12 deg and 10 cm off."""
-    faults = PoseFaults(latency=0.08, heading_sd_deg=0.5, glitches=(Glitch(15, 3, 12, 0.1),),
-                        seed=3)  # fmt: skip
-    info = write_scene_bag(tmp_path / "late.bag", seed=3, n_frames=600, fmt="ros1",
-                           sensor="depth16", faults=faults)  # fmt: skip
-    reply = _up(info.path, tmp_path / "map.json", "--fast", "--pose-source",
-                f"tum:{tum_path_for(info.path)}", "--truth", str(info.truth_path))  # fmt: skip
+    faults = PoseFaults(
+        latency=0.08, heading_sd_deg=0.5, glitches=(Glitch(15, 3, 12, 0.1),), seed=3
+    )
+    info = write_scene_bag(
+        tmp_path / "late.bag", seed=3, n_frames=600, fmt="ros1", sensor="depth16", faults=faults
+    )
+    reply = _up(
+        info.path,
+        tmp_path / "map.json",
+        "--fast",
+        "--pose-source",
+        f"tum:{tum_path_for(info.path)}",
+        "--truth",
+        str(info.truth_path),
+    )
     plan, _, seen = load_truth(info.truth_path)
-    score = evaluate_map([MappedWall.from_reply(w) for w in reply["walls"]] and reply["walls"],
-                         plan, seen)  # fmt: skip
+    score = evaluate_map(
+        [MappedWall.from_reply(w) for w in reply["walls"]] and reply["walls"], plan, seen
+    )
     found = reply["pose_source"]
     print(f"\n{score.summary()}; {found}")
     assert reply["frames"] == info.n_frames
@@ -133,10 +152,10 @@ def test_a_late_noisy_glitching_tum_file_still_maps_the_scene(tmp_path: Path) ->
 
 def test_trust_poses_and_a_given_latency_do_what_they_say(tmp_path: Path) -> None:
     bag = _jackal()
-    trusted = _up(bag, tmp_path / "trusted.json", "--fast", "--pose-source", MOCAP,
-                  "--trust-poses")  # fmt: skip
+    trusted = _up(bag, tmp_path / "trusted.json", "--fast", "--pose-source", MOCAP, "--trust-poses")
     assert "pose_source" not in trusted, "nothing judged"
-    given = _up(bag, tmp_path / "given.json", "--fast", "--pose-source", MOCAP,
-                "--pose-latency", "-0.03")  # fmt: skip
+    given = _up(
+        bag, tmp_path / "given.json", "--fast", "--pose-source", MOCAP, "--pose-latency", "-0.03"
+    )
     assert given["pose_source"]["latency_fixed"]
     assert given["pose_source"]["latency_s"] == -0.03

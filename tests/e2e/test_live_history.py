@@ -29,9 +29,14 @@ PLAYED_S = N_FRAMES / RATE_HZ / SPEED
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     return write_scene_bag(
-        tmp_path_factory.mktemp("live") / "s.bag", seed=11, n_frames=N_FRAMES, fmt="ros1",
-        sensor="depth16", camera=Camera(width=120, height=90), rate_hz=RATE_HZ,
-    )  # fmt: skip
+        tmp_path_factory.mktemp("live") / "s.bag",
+        seed=11,
+        n_frames=N_FRAMES,
+        fmt="ros1",
+        sensor="depth16",
+        camera=Camera(width=120, height=90),
+        rate_hz=RATE_HZ,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +50,16 @@ def reference(scene) -> dict:
 
 def _play_with_a_fault(stack, scene, fault) -> dict:
     """Play at 4x; 40 % in, ``fault()``; the map once the player is done."""
-    player = stack.start("player", "player", str(scene.path), "--rate", str(SPEED),
-                         "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    player = stack.start(
+        "player",
+        "player",
+        str(scene.path),
+        "--rate",
+        str(SPEED),
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     time.sleep(1.0 + 0.4 * PLAYED_S)  # the player waits about a second for its services
     before = stack.query()["frames"]
     assert 0 < before < N_FRAMES, "the fault comes mid-run"
@@ -114,9 +127,18 @@ def test_a_window_too_short_for_the_outage_counts_what_it_lost(stack, scene) -> 
     """History of 1 s, a detector down 3 s: frames are lost, and the map reply says how many."""
     stack.start("mapper", "mapper", "--history", "1", "--gap-wait", "2", *stack.zenoh_args)
     detector = stack.start("detector", "detector", "--history", "1", *stack.zenoh_args)
-    player = stack.start("player", "player", str(scene.path), "--rate", str(SPEED),
-                         "--history", "1", "--wait-for", "detector,mapper",
-                         *stack.zenoh_args)  # fmt: skip
+    player = stack.start(
+        "player",
+        "player",
+        str(scene.path),
+        "--rate",
+        str(SPEED),
+        "--history",
+        "1",
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     time.sleep(1.0 + 0.4 * PLAYED_S)
     detector.kill()
     time.sleep(3.0)

@@ -37,9 +37,14 @@ def long_bags(tmp_path_factory):
         folder / "depth", seed=31, n_frames=720, fmt="ros2-mcap", sensor="depth16", camera=SMALL
     )
     cloud = write_scene_bag(
-        folder / "cloud.bag", seed=32, n_frames=360, fmt="ros1", sensor="pointcloud",
-        camera=SMALL, compress=True,
-    )  # fmt: skip
+        folder / "cloud.bag",
+        seed=32,
+        n_frames=360,
+        fmt="ros1",
+        sensor="pointcloud",
+        camera=SMALL,
+        compress=True,
+    )
     return {"mcap-depth": depth, "ros1-pointcloud": cloud}
 
 
@@ -68,8 +73,9 @@ def test_a_long_bag_plays_to_the_end_and_every_process_exits_cleanly(
 ) -> None:
     scene = long_bags[bag]
     _services(stack)
-    played = stack.run("player", str(scene.path), *speed, "--wait-for", "detector,mapper",
-                       *stack.zenoh_args)  # fmt: skip
+    played = stack.run(
+        "player", str(scene.path), *speed, "--wait-for", "detector,mapper", *stack.zenoh_args
+    )
     assert _published(played.stdout) == scene.n_frames
     reply, skipped = stack.settled_frames(scene.n_frames, "--min-obs", "3")
     assert reply["frames"] + skipped == scene.n_frames, "every frame integrated or counted"
@@ -86,8 +92,15 @@ def test_rate_1_on_a_short_bag(stack, long_bags) -> None:
     scene = long_bags["mcap-depth"]
     _services(stack)
     started = time.monotonic()
-    played = stack.run("player", str(scene.path), "--duration", "5",
-                       "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    played = stack.run(
+        "player",
+        str(scene.path),
+        "--duration",
+        "5",
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     assert time.monotonic() - started >= 5.0, "real time"
     n = _published(played.stdout)
     assert n == 5 * RATE_HZ
@@ -100,8 +113,9 @@ def test_without_poses_the_frames_are_counted_as_dropped_and_all_exit_cleanly(
 ) -> None:
     scene = long_bags["mcap-depth"]
     _services(stack)
-    played = stack.run("player", str(scene.path), "--rate", "8", "--pose-source", "none",
-                       *stack.zenoh_args)  # fmt: skip
+    played = stack.run(
+        "player", str(scene.path), "--rate", "8", "--pose-source", "none", *stack.zenoh_args
+    )
     assert _published(played.stdout) == scene.n_frames
     assert "0 poses" in played.stdout
     deadline = time.monotonic() + 20  # frames wait 5 s for a pose that never comes
@@ -118,8 +132,17 @@ def test_without_poses_the_frames_are_counted_as_dropped_and_all_exit_cleanly(
 def test_a_looping_player_stopped_by_a_signal_exits_0(stack, long_bags, how) -> None:
     scene = long_bags["mcap-depth"]
     _services(stack)
-    player = stack.start("player", "player", str(scene.path), "--rate", "8", "--loop",
-                         "--duration", "4", *stack.zenoh_args)  # fmt: skip
+    player = stack.start(
+        "player",
+        "player",
+        str(scene.path),
+        "--rate",
+        "8",
+        "--loop",
+        "--duration",
+        "4",
+        *stack.zenoh_args,
+    )
     deadline = time.monotonic() + 60
     while " frames on " not in player.output():  # it has read the bag and starts playing
         assert time.monotonic() < deadline, player.output()
@@ -134,7 +157,7 @@ def test_a_looping_player_stopped_by_a_signal_exits_0(stack, long_bags, how) -> 
 @pytest.mark.parametrize(
     ("service", "how"),
     [("mapper", signal.SIGTERM), ("detector", signal.SIGINT), ("player", signal.SIGTERM)],
-)  # fmt: skip
+)
 def test_a_service_waiting_for_its_router_stops_on_a_signal(
     long_bags, tmp_path, service: str, how: int
 ) -> None:
@@ -142,8 +165,9 @@ def test_a_service_waiting_for_its_router_stops_on_a_signal(
     stop must still be heard then, not only once a router came (the wait is in Zenoh's code)."""
     nowhere = Stack(tmp_path, f"tcp/127.0.0.1:{free_port()}", "norouter")
     bag = [str(long_bags["ros1-pointcloud"].path)] if service == "player" else []
-    waiting = nowhere.start(service, service, *bag, *nowhere.zenoh_args,
-                            env={"WALLMAP_LOG": "INFO"})  # fmt: skip
+    waiting = nowhere.start(
+        service, service, *bag, *nowhere.zenoh_args, env={"WALLMAP_LOG": "INFO"}
+    )
     deadline = time.monotonic() + 30.0
     while "connecting to" not in waiting.output() and " frames on " not in waiting.output():
         assert waiting.proc.poll() is None, waiting.output()
@@ -167,11 +191,26 @@ def test_up_stopped_by_ctrl_c_stops_its_services_cleanly(long_bags, tmp_path) ->
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with log.open("wb") as output:
         up = subprocess.Popen(
-            [sys.executable, "-m", "wallmap", "up", str(scene.path), "--rate", "4",
-             "--connect", endpoint, "--json-out", str(out), "--picture", str(picture)],
-            stdout=output, stderr=subprocess.STDOUT, env={**os.environ, "WALLMAP_LOG": "INFO"},
+            [
+                sys.executable,
+                "-m",
+                "wallmap",
+                "up",
+                str(scene.path),
+                "--rate",
+                "4",
+                "--connect",
+                endpoint,
+                "--json-out",
+                str(out),
+                "--picture",
+                str(picture),
+            ],
+            stdout=output,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "WALLMAP_LOG": "INFO"},
             start_new_session=True,  # a terminal's group of its own: the signal goes to all in it
-        )  # fmt: skip
+        )
         time.sleep(8.0)
         os.killpg(up.pid, signal.SIGINT)
         code = up.wait(timeout=60)
@@ -192,8 +231,16 @@ def test_router_killed_and_restarted_in_real_time_the_map_goes_on(stack, long_ba
     scene = long_bags["mcap-depth"]
     _services(stack)
     router = stack.services[0]
-    player = stack.start("player", "player", str(scene.path), "--rate", "4",
-                         "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    player = stack.start(
+        "player",
+        "player",
+        str(scene.path),
+        "--rate",
+        "4",
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     played_s = scene.n_frames / RATE_HZ / 4
     time.sleep(1.0 + 0.4 * played_s)  # the player waits about 1 s for its services
     before = stack.query()["frames"]
@@ -217,8 +264,14 @@ def test_router_killed_and_restarted_in_real_time_the_map_goes_on(stack, long_ba
 
 
 def test_a_player_waiting_for_its_services_stops_at_once_on_sigterm(stack, long_bags) -> None:
-    player = stack.start("player", "player", str(long_bags["mcap-depth"].path),
-                         "--wait-for", "detector,mapper", *stack.zenoh_args)  # fmt: skip
+    player = stack.start(
+        "player",
+        "player",
+        str(long_bags["mcap-depth"].path),
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     deadline = time.monotonic() + 60
     while " frames on " not in player.output():  # the bag read: now it waits for its services
         assert time.monotonic() < deadline, player.output()

@@ -99,10 +99,21 @@ def test_a_link_cut_mid_run_loses_no_frame(network, tmp_path, speed) -> None:
         settings = ZenohSettings(connect=(endpoint,), wait_for_router=20.0)
         keys = Keys()
         player = subprocess.Popen(
-            [*wallmap, "player", str(bag), *speed, "--paused", "--wait-for", "detector,mapper",
-             "--connect", endpoint],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        )  # fmt: skip
+            [
+                *wallmap,
+                "player",
+                str(bag),
+                *speed,
+                "--paused",
+                "--wait-for",
+                "detector,mapper",
+                "--connect",
+                endpoint,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         with open_session(settings) as session:
             _until(lambda: _control(session, keys, "status"))
             _control(session, keys, "resume")
@@ -118,9 +129,12 @@ def test_a_link_cut_mid_run_loses_no_frame(network, tmp_path, speed) -> None:
         reply = json.loads(
             subprocess.run(
                 [*wallmap, "query", "--json", "--connect", endpoint],
-                capture_output=True, text=True, check=True, timeout=30,
+                capture_output=True,
+                text=True,
+                check=True,
+                timeout=30,
             ).stdout
-        )  # fmt: skip
+        )
         assert (reply["frames"], reply["lost"], reply["dropped"]) == (N_FRAMES, 0, 0)
         for name in ("detector", "mapper", "router"):
             assert "Traceback" not in (tmp_path / f"{name}.log").read_text()

@@ -23,9 +23,15 @@ def test_odometry_service_gives_the_mapper_its_poses(stack, odometry_scene) -> N
         stack.start(service, service, *extra, *stack.zenoh_args)
     for run in (1, 2):
         played = stack.run(
-            "player", str(bag), "--fast", "--pose-source", "none",
-            "--wait-for", "detector,mapper,odometry", *stack.zenoh_args,
-        )  # fmt: skip
+            "player",
+            str(bag),
+            "--fast",
+            "--pose-source",
+            "none",
+            "--wait-for",
+            "detector,mapper,odometry",
+            *stack.zenoh_args,
+        )
         assert played.returncode == 0, played.stderr
         assert f"published {N_FRAMES} frames and 0 poses" in played.stdout
         reply = stack.query("--min-obs", "3")
@@ -46,8 +52,14 @@ def test_odometry_command_line_errors(stack) -> None:
     assert "expected X,Y,YAW" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
     clash = stack.run(
-        "up", "missing.bag", "--odometry", "--pose-source", "odom", *stack.zenoh_args, timeout=30,
+        "up",
+        "missing.bag",
+        "--odometry",
+        "--pose-source",
+        "odom",
+        *stack.zenoh_args,
+        timeout=30,
         expect=None,
-    )  # fmt: skip
+    )
     assert clash.returncode != 0
     assert "--odometry estimates the poses itself" in clash.stderr

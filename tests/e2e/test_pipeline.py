@@ -64,9 +64,10 @@ def assert_t_at_the_origin(walls, plan) -> None:
     along = np.subtract(outer.p1, outer.p0) / outer.length
     normal = np.array([-along[1], along[0]])
     on_outer = [
-        w for w in walls
+        w
+        for w in walls
         if abs(normal @ np.asarray(w["p0"])) < 0.05 and abs(normal @ np.asarray(w["p1"])) < 0.05
-    ]  # fmt: skip
+    ]
     assert len(on_outer) == 1, "one wall, not cut at the junction"
     positions = np.asarray(on_outer[0]["segments"]).reshape(-1, 2) @ along
     assert positions.min() < -2.0

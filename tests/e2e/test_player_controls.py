@@ -51,9 +51,14 @@ def test_player_is_paused_stepped_sought_and_sped_up_over_zenoh(stack, bag) -> N
     with open_session(settings) as session:
         progress = session.declare_subscriber(keys.player_progress, zenoh.handlers.FifoChannel(512))
         player = stack.start(
-            "player", "player", str(bag), "--paused", "--wait-for", "detector,mapper",
+            "player",
+            "player",
+            str(bag),
+            "--paused",
+            "--wait-for",
+            "detector,mapper",
             *stack.zenoh_args,
-        )  # fmt: skip
+        )
 
         def status() -> dict | None:
             try:
@@ -101,15 +106,33 @@ def test_start_duration_topics_and_loop(stack, bag) -> None:
     )
     assert "--topics names nope, not in" in wrong.stderr
     only = stack.run(
-        "player", str(bag), "--fast", "--duration", "1", "--topics",
-        "/camera/depth/image_raw,/camera/depth/camera_info,/tf,/tf_static", *stack.zenoh_args,
-    )  # fmt: skip
+        "player",
+        str(bag),
+        "--fast",
+        "--duration",
+        "1",
+        "--topics",
+        "/camera/depth/image_raw,/camera/depth/camera_info,/tf,/tf_static",
+        *stack.zenoh_args,
+    )
     assert only.returncode == 0, only.stderr
     looping = subprocess.Popen(
-        [sys.executable, "-m", "wallmap", "player", str(bag), "--fast", "--loop",
-         "--duration", "1", *stack.zenoh_args],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wallmap",
+            "player",
+            str(bag),
+            "--fast",
+            "--loop",
+            "--duration",
+            "1",
+            *stack.zenoh_args,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(8)
     looping.terminate()
     out, err = looping.communicate(timeout=30)

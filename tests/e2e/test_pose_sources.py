@@ -114,9 +114,16 @@ def test_outside_publisher_over_zenoh_at_4x(stack, scene, reference):
         text=True,
     )
     played = stack.run(
-        "player", str(info.path), "--pose-source", "none", "--rate", "4",
-        "--wait-for", "detector,mapper", *stack.zenoh_args,
-    )  # fmt: skip
+        "player",
+        str(info.path),
+        "--pose-source",
+        "none",
+        "--rate",
+        "4",
+        "--wait-for",
+        "detector,mapper",
+        *stack.zenoh_args,
+    )
     assert played.returncode == 0, played.stderr
     assert publisher.wait(timeout=60) == 0
     assert f"published {len(info.trajectory)} poses" in publisher.stdout.read()
@@ -174,8 +181,15 @@ def odometry_cdr(info) -> list[bytes]:
 
 def test_cdr_odometry_over_zenoh(stack, scene, reference):
     info, _ = scene
-    stack.start("mapper", "mapper", "--pose-key", "rt/odom",
-                "--pose-format", "ros2:nav_msgs/msg/Odometry", *stack.zenoh_args)  # fmt: skip
+    stack.start(
+        "mapper",
+        "mapper",
+        "--pose-key",
+        "rt/odom",
+        "--pose-format",
+        "ros2:nav_msgs/msg/Odometry",
+        *stack.zenoh_args,
+    )
     stack.start("detector", "detector", *stack.zenoh_args)
     publish_cdr(stack, "rt/odom", odometry_cdr(info))
     played = stack.run(
@@ -190,8 +204,15 @@ def test_cdr_tf_from_the_bag_over_zenoh(stack, scene, reference):
     with AnyReader([info.path]) as reader:
         conns = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]
         raw = [(c.topic, bytes(data)) for c, _, data in reader.messages(connections=conns)]
-    stack.start("mapper", "mapper", "--pose-key", "rt/tf$*",
-                "--pose-format", "ros2:tf2_msgs/msg/TFMessage", *stack.zenoh_args)  # fmt: skip
+    stack.start(
+        "mapper",
+        "mapper",
+        "--pose-key",
+        "rt/tf$*",
+        "--pose-format",
+        "ros2:tf2_msgs/msg/TFMessage",
+        *stack.zenoh_args,
+    )
     stack.start("detector", "detector", *stack.zenoh_args)
     publish_cdr(stack, "rt/tf", [data for topic, data in raw if topic == "/tf"])
     played = stack.run(
@@ -215,8 +236,9 @@ def test_laserscan_bag_maps_accurately(stack, tmp_path):
 
 def test_frames_without_a_pose_are_dropped_counted_and_visible(stack, scene):
     info, _ = scene
-    reply = map_with(stack, info.path, "--fast", "--pose-source", "none",
-                     mapper_args=("--pose-wait", "0.2"))  # fmt: skip
+    reply = map_with(
+        stack, info.path, "--fast", "--pose-source", "none", mapper_args=("--pose-wait", "0.2")
+    )
     assert reply["frames"] == 0
     assert reply["dropped"] == N_FRAMES
     assert reply["dropped_reasons"] == {"pose_timeout": N_FRAMES, "no_pose": 0, "backlog": 0}

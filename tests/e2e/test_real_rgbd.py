@@ -41,8 +41,18 @@ def up(path: Path, out: Path, *flags: str, fast: bool = True) -> dict:
     """`wallmap up` on a private port, as a user runs it (``fast``: ``--fast``); its final map."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     pace = ["--fast"] if fast else []
-    run_wallmap("up", str(path), *pace, "--exit-when-done", "--json-out", str(out),
-                "--connect", endpoint, *flags, timeout=240)  # fmt: skip
+    run_wallmap(
+        "up",
+        str(path),
+        *pace,
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        "--connect",
+        endpoint,
+        *flags,
+        timeout=240,
+    )
     return json.loads(out.read_text())
 
 
@@ -120,9 +130,10 @@ def test_the_cabinet_in_an_empty_hall_is_no_wall(tmp_path) -> None:
 def test_the_level_and_floor_of_the_kitchen_are_found() -> None:
     folder, camera = recording("redkitchen")
     seen = points_at_heights(
-        folder, (-0.1, 0.05),
+        folder,
+        (-0.1, 0.05),
         SourceOptions(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale),
-    )  # fmt: skip
+    )
     assert len(seen) > 1000, "the floor lies at z = 0 once levelled"
     assert np.isfinite(seen).all()
 
@@ -132,8 +143,17 @@ def test_the_kitchen_folder_with_default_flags_says_what_to_give(tmp_path) -> No
     with TUM's the detector sees no line: the run says so in one line, naming the flags."""
     folder, _ = recording("redkitchen")
     out = tmp_path / "map.json"
-    done = run_wallmap("up", str(folder), "--fast", "--exit-when-done", "--json-out", str(out),
-                       "--connect", f"tcp/127.0.0.1:{free_port()}", timeout=240)  # fmt: skip
+    done = run_wallmap(
+        "up",
+        str(folder),
+        "--fast",
+        "--exit-when-done",
+        "--json-out",
+        str(out),
+        "--connect",
+        f"tcp/127.0.0.1:{free_port()}",
+        timeout=240,
+    )
     reply = json.loads(out.read_text())
     assert reply["config"]["player"]["source"].get("depth_scale") is None  # the folder's own
     assert reply["observations"] == 0

@@ -25,9 +25,12 @@ N_FRAMES = 300
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     return write_scene_bag(
-        tmp_path_factory.mktemp("recovery") / "s.bag", seed=11, n_frames=N_FRAMES, fmt="ros1",
+        tmp_path_factory.mktemp("recovery") / "s.bag",
+        seed=11,
+        n_frames=N_FRAMES,
+        fmt="ros1",
         sensor="depth16",
-    )  # fmt: skip
+    )
 
 
 def _control(session, keys: Keys, cmd: str) -> dict | None:

@@ -134,8 +134,9 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
 
 def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene_bags) -> None:
     info = scene_bags("live-depth16", seed=21, n_frames=120, fmt="ros2-mcap", sensor="depth16")
-    source = stack.start("ros2", "ros2", "--sensor", SENSORS["depth16"], "--tf-wait", "0.5",
-                *stack.zenoh_args)  # fmt: skip
+    source = stack.start(
+        "ros2", "ros2", "--sensor", SENSORS["depth16"], "--tf-wait", "0.5", *stack.zenoh_args
+    )
     _wait_for(stack, "ros2")
     with client(stack.endpoint) as session:
         robot = Robot(session, info.path, "")
@@ -160,10 +161,23 @@ def test_up_maps_a_live_robot_until_stopped(tmp_path: Path, scene_bags) -> None:
     out = tmp_path / "map.json"
     log = tmp_path / "up.log"
     up = subprocess.Popen(
-        [sys.executable, "-m", "wallmap", "up", "--ros2", "--namespace", "robot1",
-         "--sensor", SENSORS["laserscan"], "--json-out", str(out), *zenoh_args],
-        stdout=log.open("wb"), stderr=subprocess.STDOUT,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wallmap",
+            "up",
+            "--ros2",
+            "--namespace",
+            "robot1",
+            "--sensor",
+            SENSORS["laserscan"],
+            "--json-out",
+            str(out),
+            *zenoh_args,
+        ],
+        stdout=log.open("wb"),
+        stderr=subprocess.STDOUT,
+    )
     try:
         robot = play_to_the_source(endpoint, zenoh_args[2:], info.path, "robot1", log)
         time.sleep(2.0)  # the last frames through the detector and the mapper
@@ -183,8 +197,9 @@ def test_up_maps_a_live_robot_until_stopped(tmp_path: Path, scene_bags) -> None:
 
 
 def test_without_sensor_and_nothing_announced_the_source_says_so_and_exits(stack: Stack) -> None:
-    out = stack.run("ros2", "--namespace", "robot9", "--discover-wait", "1", *stack.zenoh_args,
-                    expect=None)  # fmt: skip
+    out = stack.run(
+        "ros2", "--namespace", "robot9", "--discover-wait", "1", *stack.zenoh_args, expect=None
+    )
     assert out.returncode == 1, out.stderr
     assert "Traceback" not in out.stderr
     assert out.stderr.strip().splitlines()[-1] == (
@@ -209,8 +224,16 @@ def test_camera_info_elsewhere_and_whole_clouds(stack: Stack, scene_bags) -> Non
         )
         robot = Robot(session, info.path, "", renamed=renamed)
         try:
-            stack.start("ros2", "ros2", "--sensor", SENSORS["depth16"], "--camera-info",
-                        "/calibration/depth", "--whole-clouds", *stack.zenoh_args)  # fmt: skip
+            stack.start(
+                "ros2",
+                "ros2",
+                "--sensor",
+                SENSORS["depth16"],
+                "--camera-info",
+                "/calibration/depth",
+                "--whole-clouds",
+                *stack.zenoh_args,
+            )
             _wait_for(stack, "ros2")
             robot.play()
         finally:

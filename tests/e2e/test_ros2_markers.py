@@ -29,8 +29,15 @@ def test_a_mapped_bag_comes_out_as_markers_and_a_late_subscriber_gets_them(stack
             keys.markers, lambda sample: live.append(sample.payload.to_bytes())
         )
         # At 4x the 200 frames take over 3 s: several map updates (every 0.5 s) while it plays.
-        played = stack.run("player", str(scene.path), "--rate", "4", "--wait-for",
-                           "detector,mapper", *stack.zenoh_args)  # fmt: skip
+        played = stack.run(
+            "player",
+            str(scene.path),
+            "--rate",
+            "4",
+            "--wait-for",
+            "detector,mapper",
+            *stack.zenoh_args,
+        )
         assert played.returncode == 0, played.stderr
         time.sleep(1.5)  # the markers go out with the next map update (every 0.5 s)
         subscriber.undeclare()

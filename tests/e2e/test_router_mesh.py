@@ -31,8 +31,17 @@ def _router(tmp_path: Path, name: str, port: int, *join: str) -> subprocess.Pope
 
 
 def _map_through(port: int, prefix: str) -> subprocess.CompletedProcess[str]:
-    return run_wallmap("query", "--json", "--connect", f"tcp/127.0.0.1:{port}", "--prefix",
-                       prefix, "--timeout", "2", expect=None)  # fmt: skip
+    return run_wallmap(
+        "query",
+        "--json",
+        "--connect",
+        f"tcp/127.0.0.1:{port}",
+        "--prefix",
+        prefix,
+        "--timeout",
+        "2",
+        expect=None,
+    )
 
 
 def test_a_router_joined_to_another_reaches_its_mapper(tmp_path: Path) -> None:
@@ -42,9 +51,19 @@ def test_a_router_joined_to_another_reaches_its_mapper(tmp_path: Path) -> None:
     try:
         log = (tmp_path / "mapper.log").open("wb")
         procs["mapper"] = subprocess.Popen(
-            [sys.executable, "-m", "wallmap", "mapper", "--connect", f"tcp/127.0.0.1:{a}",
-             "--prefix", prefix], stdout=log, stderr=log,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "wallmap",
+                "mapper",
+                "--connect",
+                f"tcp/127.0.0.1:{a}",
+                "--prefix",
+                prefix,
+            ],
+            stdout=log,
+            stderr=log,
+        )
         deadline = time.monotonic() + 30
         while _map_through(a, prefix).returncode != 0:
             assert time.monotonic() < deadline, (tmp_path / "mapper.log").read_text()

@@ -44,14 +44,51 @@ def certificates(tmp_path_factory) -> Path:
     def openssl(*args: str) -> None:
         subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True)
 
-    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out",
-            "ca.pem", "-days", "1", "-subj", "/CN=wallmap test CA")  # fmt: skip
-    openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out",
-            "server.csr", "-subj", "/CN=localhost")  # fmt: skip
+    openssl(
+        "req",
+        "-x509",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        "ca.key",
+        "-out",
+        "ca.pem",
+        "-days",
+        "1",
+        "-subj",
+        "/CN=wallmap test CA",
+    )
+    openssl(
+        "req",
+        "-newkey",
+        "rsa:2048",
+        "-nodes",
+        "-keyout",
+        "server.key",
+        "-out",
+        "server.csr",
+        "-subj",
+        "/CN=localhost",
+    )
     (folder / "san.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
-    openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-            "-CAcreateserial", "-out", "server.pem", "-days", "1",
-            "-extfile", "san.cnf")  # fmt: skip
+    openssl(
+        "x509",
+        "-req",
+        "-in",
+        "server.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-out",
+        "server.pem",
+        "-days",
+        "1",
+        "-extfile",
+        "san.cnf",
+    )
     tls = "transport: { link: { tls: { %s } } }"
     (folder / "router.json5").write_text(
         "{" + tls % f'listen_private_key: "{folder}/server.key", '
@@ -73,9 +110,13 @@ def test_tls_end_to_end(stack, certificates) -> None:
     client = ["--connect", f"tls/localhost:{port}", "--prefix", stack.prefix]
     client += ["--zenoh-config", str(certificates / "client.json5")]
     stack.start(
-        "tls-router", "router", "--listen", f"tls/127.0.0.1:{port}",
-        "--zenoh-config", str(certificates / "router.json5"),
-    )  # fmt: skip
+        "tls-router",
+        "router",
+        "--listen",
+        f"tls/127.0.0.1:{port}",
+        "--zenoh-config",
+        str(certificates / "router.json5"),
+    )
     wait_for_port(port)
     _services(stack, *client)
     played = stack.run("player", str(sample_bag()), "--fast", *client)
@@ -105,9 +146,17 @@ def test_access_control_lets_wallmap_keys_through_and_nothing_else(stack, tmp_pa
     assert played.returncode == 0, played.stderr
     _services(stack, "--connect", endpoint, "--prefix", "other")  # everything else: denied
     denied = stack.run(
-        "player", str(sample_bag()), "--fast", "--connect", endpoint, "--prefix", "other",
-        "--wait-timeout", "3", expect=1,
-    )  # fmt: skip
+        "player",
+        str(sample_bag()),
+        "--fast",
+        "--connect",
+        endpoint,
+        "--prefix",
+        "other",
+        "--wait-timeout",
+        "3",
+        expect=1,
+    )
     assert "no detector and no mapper running under prefix 'other'" in denied.stderr
 
 

@@ -38,9 +38,18 @@ def test_mapper_slam_publishes_the_corrected_pose_and_survives_a_restart(
         corrections = session.declare_subscriber(
             keys.pose_correction, zenoh.handlers.FifoChannel(4096)
         )
-        player = stack.start("player", "player", str(scene.path), "--pose-source", "odom",
-                             "--rate", "4", "--wait-for", "detector,mapper",
-                             *stack.zenoh_args)  # fmt: skip
+        player = stack.start(
+            "player",
+            "player",
+            str(scene.path),
+            "--pose-source",
+            "odom",
+            "--rate",
+            "4",
+            "--wait-for",
+            "detector,mapper",
+            *stack.zenoh_args,
+        )
         time.sleep(1.0 + 0.4 * N_FRAMES / 15.0 / 4)
         deadline = time.monotonic() + 30  # a busy machine: the first save may come later
         while not state.exists() and time.monotonic() < deadline:

@@ -876,8 +876,9 @@ def with_counters(plan: FloorPlan, seed: int, counters: int = 3) -> FloorPlan:
             foot = p + rng.uniform(width / 2, wall.length - width / 2) * direction
             yaw = math.atan2(direction[1], direction[0])
             counter = Furniture(_point(foot + normal * 0.35), (width, 0.6), yaw, COUNTER_HEIGHT)
-            if not _box_fits(FloorPlan(walls=plan.walls, furniture=(*furniture, counter)),
-                             counter, curve):  # fmt: skip
+            if not _box_fits(
+                FloorPlan(walls=plan.walls, furniture=(*furniture, counter)), counter, curve
+            ):
                 continue
             furniture.append(counter)
             slots = np.linspace(-width / 2, width / 2, int(rng.integers(2, 5)) + 2)[1:-1]
@@ -938,8 +939,14 @@ def junction_plan(seed: int) -> FloorPlan:
         ((6.0, 0.0), (6.0, depth)),
     ]
     middle = door + 0.8
-    route = [(-4.5, depth - 1.2), (-3.5, 1.2), (-1.2, middle), (1.2, middle), (3.5, 1.2),
-             (4.5, depth - 1.2)]  # fmt: skip
+    route = [
+        (-4.5, depth - 1.2),
+        (-3.5, 1.2),
+        (-1.2, middle),
+        (1.2, middle),
+        (3.5, 1.2),
+        (4.5, depth - 1.2),
+    ]
     angle = float(rng.uniform(-math.pi, math.pi))
 
     def turn(p: Sequence[float]) -> Point:

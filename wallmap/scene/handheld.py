@@ -158,8 +158,9 @@ def carry_camera(
         t = float(truth.stamps[k] - truth.stamps[0])
         mount = hand.mount(t, phase)
         depth, hit_wall = render_depth(plan, *truth.pose_at(k), camera, rng, mount @ LINK_OPTICAL)
-        for wall_id in walls_seen(hit_wall, depth, camera, z_band=SEEN_BAND,
-                                  mount=mount @ LINK_OPTICAL):  # fmt: skip
+        for wall_id in walls_seen(
+            hit_wall, depth, camera, z_band=SEEN_BAND, mount=mount @ LINK_OPTICAL
+        ):
             seen_counts[wall_id] += 1
         map_link = planar_matrix(*truth.pose_at(k)) @ mount
         frames.append((float(truth.stamps[k]), depth, mount, recorded_from_map @ map_link))
@@ -209,9 +210,14 @@ def _write_bag(path: Path, frames: Frames, camera: Camera, style: HandheldStyle)
         info_topic = sink.topic(CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo")
         first_ns = stamp_to_ns(frames[0][0])
         optical = transform_stamped(
-            sink, TF_STATIC_TOPIC, first_ns, CAMERA_LINK_FRAME, OPTICAL_FRAME, (0.0, 0.0, 0.0),
+            sink,
+            TF_STATIC_TOPIC,
+            first_ns,
+            CAMERA_LINK_FRAME,
+            OPTICAL_FRAME,
+            (0.0, 0.0, 0.0),
             OPTICAL_QUATERNION,
-        )  # fmt: skip
+        )
         sink.write(static, first_ns, tf_message(sink, optical))
         for stamp, depth, mount, recorded_link in frames:
             stamp_ns = stamp_to_ns(stamp)

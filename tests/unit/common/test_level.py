@@ -17,8 +17,9 @@ def room_points(rng: np.random.Generator, n: int = 3000) -> np.ndarray:
     floor = np.column_stack([rng.uniform(0, 3, n), rng.uniform(0, 3, n), np.zeros(n)])
     wall_a = np.column_stack([np.zeros(n), rng.uniform(0, 3, n), rng.uniform(0, 2.5, n)])
     wall_b = np.column_stack([rng.uniform(0, 3, n), np.full(n, 3.0), rng.uniform(0, 2.5, n)])
-    table = np.column_stack([rng.uniform(1, 2, n // 3), rng.uniform(1, 2, n // 3),
-                             np.full(n // 3, 0.75)])  # fmt: skip
+    table = np.column_stack(
+        [rng.uniform(1, 2, n // 3), rng.uniform(1, 2, n // 3), np.full(n // 3, 0.75)]
+    )
     points = np.vstack([floor, wall_a, wall_b, table])
     return points + rng.normal(0, 0.005, points.shape)
 
@@ -80,8 +81,9 @@ def test_the_sensors_up_decides_between_planes_that_explain_the_scene_equally() 
 
 def test_too_little_to_tell_leaves_the_frame_as_it_is() -> None:
     cloud = np.random.default_rng(0).normal(size=(12, 3))
-    level = level_from_frames([cloud], np.array([[0, 0, 1.0]]), np.zeros((1, 3)),
-                              np.random.default_rng(0))  # fmt: skip
+    level = level_from_frames(
+        [cloud], np.array([[0, 0, 1.0]]), np.zeros((1, 3)), np.random.default_rng(0)
+    )
     assert level.is_level
     assert level.floor is None
     assert "no floor seen" in level.describe()

@@ -60,8 +60,16 @@ def test_pose_and_observations_round_trip():
 def test_walls_beyond_any_building_are_refused_without_overflowing() -> None:
     wall = WallObservation(np.array([1e200, 1e200]), np.eye(2), np.zeros(2), np.ones(2), 30, 0.01)
     far_end = replace(wall, closest=np.array([1.0, 2.0]), p1=np.array([0.0, -2e6]))
-    record = WallRecord(0, 1.0, 2.0, ((1e-4, 0.0), (0.0, 1e-4)), (0.0, 0.0), (1e300, 0.0),
-                        (((0.0, 0.0), (1e300, 0.0)),), 10)  # fmt: skip
+    record = WallRecord(
+        0,
+        1.0,
+        2.0,
+        ((1e-4, 0.0), (0.0, 1e-4)),
+        (0.0, 0.0),
+        (1e300, 0.0),
+        (((0.0, 0.0), (1e300, 0.0)),),
+        10,
+    )
     with np.errstate(all="raise"):
         for bad in (wall, far_end):
             obs = Observations("r", 1, 2.0, "base_link", [bad])

@@ -35,8 +35,9 @@ def test_quaternions_and_roll_pitch_yaw_round_trip() -> None:
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
         rotation = rotation_matrix(tuple(q))
-        np.testing.assert_allclose(rotation_matrix(quaternion_from_matrix(rotation)), rotation,
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            rotation_matrix(quaternion_from_matrix(rotation)), rotation, atol=1e-12
+        )
         np.testing.assert_allclose(rpy_matrix(*rpy_from_matrix(rotation)), rotation, atol=1e-12)
 
 

@@ -56,8 +56,13 @@ def test_without_walls_the_prior_is_the_answer() -> None:
     source = np.array([1.0, 2.0, 0.5])
     mean = np.array([0.01, 0.0, 0.002, 0.0, 0.0, 0.0])
     cov = np.eye(pose_fit.STATE) * 1e-4
-    empty = pose_fit.Pairs(*(np.zeros((0, 2)),) * 1, np.zeros((0, 2, 2)), np.zeros((0, 2)),
-                           np.zeros((0, 2)), np.zeros((0, 2, 2)))  # fmt: skip
+    empty = pose_fit.Pairs(
+        *(np.zeros((0, 2)),) * 1,
+        np.zeros((0, 2, 2)),
+        np.zeros((0, 2)),
+        np.zeros((0, 2)),
+        np.zeros((0, 2, 2)),
+    )
     fitted = pose_fit.fit(mean, cov, source, empty)
     np.testing.assert_allclose(fitted.pose, pose_fit.frame_pose(mean, source)[0])
     np.testing.assert_allclose(fitted.cov, cov)
@@ -67,8 +72,9 @@ def test_a_held_state_stays_at_its_mean() -> None:
     true_pose = np.array([0.0, 0.0, 0.1])
     source = se2.compose(true_pose, np.array([0.05, 0.0, 0.02]))
     active = np.array([False, False, False, True, True, True])
-    fitted = pose_fit.fit(np.zeros(pose_fit.STATE), np.eye(pose_fit.STATE), source,
-                          _room(true_pose), active)  # fmt: skip
+    fitted = pose_fit.fit(
+        np.zeros(pose_fit.STATE), np.eye(pose_fit.STATE), source, _room(true_pose), active
+    )
     np.testing.assert_allclose(fitted.xi[pose_fit.OFFSET], 0.0)
     np.testing.assert_allclose(fitted.pose, true_pose, atol=1e-5)
     assert np.all(fitted.cov[pose_fit.OFFSET, :] == 0.0)

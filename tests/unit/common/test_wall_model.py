@@ -170,8 +170,9 @@ def test_the_line_jacobian_matches_numeric_differentiation():
     for _ in range(50):
         rho, theta = rng.uniform(0.3, 6.0), rng.uniform(-np.pi, np.pi)
         s = rho * np.array([np.cos(theta), np.sin(theta)])
-        numeric = numeric_jacobian(lambda x: x[0] * np.array([np.cos(x[1]), np.sin(x[1])]),
-                                   np.array([rho, theta]))  # fmt: skip
+        numeric = numeric_jacobian(
+            lambda x: x[0] * np.array([np.cos(x[1]), np.sin(x[1])]), np.array([rho, theta])
+        )
         np.testing.assert_allclose(ekf.line_jacobian(s), numeric, atol=1e-6)
 
 

@@ -490,8 +490,9 @@ def test_json_and_text_say_the_same(tmp_path: Path) -> None:
 
 def test_the_pose_source_given_is_the_one_judged(tmp_path: Path) -> None:
     """`wallmap doctor BAG --pose-source SPEC`: the verdict is the player's for SPEC."""
-    info = write_scene_bag(tmp_path / "scene.bag", seed=11, n_frames=30, fmt="ros1",
-                           sensor="depth16")  # fmt: skip
+    info = write_scene_bag(
+        tmp_path / "scene.bag", seed=11, n_frames=30, fmt="ros1", sensor="depth16"
+    )
     path = str(info.path)
     verdicts = {}
     for spec in ("pose:/nonexistent", "bogus", "none", "odom", "pose:/amcl_pose"):

@@ -30,10 +30,19 @@ def _fox(message: Any) -> dict[str, list[Any]]:
 
 def _wall(wall_id: int, *, tentative: bool = False, x: float = 1.0) -> dict[str, Any]:
     return {
-        "id": wall_id, "u": x, "v": 0.0, "cov": [[1e-4, 0.0], [0.0, 1e-4]],
-        "p0": [x, -1.0], "p1": [x, 2.0], "segments": [[[x, -1.0], [x, 0.5]], [[x, 1.0], [x, 2.0]]],
-        "n_obs": 5, "n_views": 3, "tentative": tentative, "first_seen": 1.0, "last_seen": 2.0,
-    }  # fmt: skip
+        "id": wall_id,
+        "u": x,
+        "v": 0.0,
+        "cov": [[1e-4, 0.0], [0.0, 1e-4]],
+        "p0": [x, -1.0],
+        "p1": [x, 2.0],
+        "segments": [[[x, -1.0], [x, 0.5]], [[x, 1.0], [x, 2.0]]],
+        "n_obs": 5,
+        "n_views": 3,
+        "tentative": tentative,
+        "first_seen": 1.0,
+        "last_seen": 2.0,
+    }
 
 
 def _obs(stamp: float, *segments: tuple[tuple[float, float], tuple[float, float]]) -> Observations:
@@ -81,10 +90,13 @@ def test_every_wall_map_message_is_the_whole_map() -> None:
     fb = pytest.importorskip("wallmap.foxglove_bridge")
     bridge = fb.Bridge()
     reply = {
-        "frame": "map", "frames": 10, "observations": 20, "stamp": 3.0,
+        "frame": "map",
+        "frames": 10,
+        "observations": 20,
+        "stamp": 3.0,
         "walls": [_wall(1), _wall(2, tentative=True)],
         "trajectory": [[1.0, 0.0, 0.0, 0.0], [2.0, 0.5, 0.0, 0.1]],
-    }  # fmt: skip
+    }
     outs = bridge.map_reply(MapReply.from_map(reply))
     assert [(o.topic, o.log_time) for o in outs] == [
         ("/wallmap/trajectory", 2_000_000_000),

@@ -52,8 +52,12 @@ def test_sent_live_the_tilted_frame_is_levelled_from_the_first_frames(handheld_r
     info = handheld_recordings["camera"]
     pipeline = pipeline_for(Config())
     reported: list[tuple[str, str]] = []
-    live = LiveFrames(IMAGE, parse_pose_source("tf"), rows=pipeline.rows,
-                      report=lambda counter, line: reported.append((counter, line)))  # fmt: skip
+    live = LiveFrames(
+        IMAGE,
+        parse_pose_source("tf"),
+        rows=pipeline.rows,
+        report=lambda counter, line: reported.append((counter, line)),
+    )
     sent = 0
     with AnyReader([info.path], default_typestore=ros2_typestore()) as reader:
         for connection, _, raw in reader.messages():
@@ -68,8 +72,18 @@ def test_sent_live_the_tilted_frame_is_levelled_from_the_first_frames(handheld_r
             for pose in live.take_poses():
                 pipeline.add_pose(pose)
             for frame in frames:
-                pipeline.step(Frame("live", sent, frame.stamp, frame.frame_id, frame.points,
-                                    frame.T_base_sensor, "depth", band=frame.band))  # fmt: skip
+                pipeline.step(
+                    Frame(
+                        "live",
+                        sent,
+                        frame.stamp,
+                        frame.frame_id,
+                        frame.points,
+                        frame.T_base_sensor,
+                        "depth",
+                        band=frame.band,
+                    )
+                )
                 sent += 1
     assert sent >= info.n_frames - 15  # the last tf_wait's frames still wait
     counters = [counter for counter, _ in reported]

@@ -8,10 +8,19 @@ from wallmap.map_client import format_table
 
 def _wall(wall_id: int) -> WallRecord:
     return WallRecord(
-        id=wall_id, u=1.0, v=0.0, cov=((1e-4, 0.0), (0.0, 1e-4)), p0=(1.0, -1.0), p1=(1.0, 1.0),
-        segments=(((1.0, -1.0), (1.0, 1.0)),), n_obs=5, n_views=2, tentative=False,
-        first_seen=0.0, last_seen=1.0,
-    )  # fmt: skip
+        id=wall_id,
+        u=1.0,
+        v=0.0,
+        cov=((1e-4, 0.0), (0.0, 1e-4)),
+        p0=(1.0, -1.0),
+        p1=(1.0, 1.0),
+        segments=(((1.0, -1.0), (1.0, 1.0)),),
+        n_obs=5,
+        n_views=2,
+        tentative=False,
+        first_seen=0.0,
+        last_seen=1.0,
+    )
 
 
 def test_one_wall_is_one_row_under_the_header() -> None:

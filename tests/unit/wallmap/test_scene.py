@@ -180,8 +180,12 @@ def test_scene_kinds_give_valid_deterministic_plans(name, seed):
     assert walls_meet_only_where_joined(plan)
     if kind.junction:  # drawn by hand: two rooms, the divider standing on the outer wall
         outer, stem = plan.walls[0], plan.walls[1]
-        assert point_segment_distance(np.zeros((1, 2)), np.array([outer.p0]),
-                                      np.array([outer.p1]))[0, 0] < 1e-9  # fmt: skip
+        assert (
+            point_segment_distance(np.zeros((1, 2)), np.array([outer.p0]), np.array([outer.p1]))[
+                0, 0
+            ]
+            < 1e-9
+        )
         assert min(math.dist(stem.p0, (0, 0)), math.dist(stem.p1, (0, 0))) < 1e-9
         assert clearance(plan, traj.positions).min() >= 0.6
         return

@@ -43,10 +43,17 @@ def drive(wall_map: WallMap, frames, start: int = 0) -> None:
             rot = se2.rotation(pose[2])
             rays = (np.asarray(ends, float) - pose[:2]) @ rot
         wall_map.integrate(
-            Observations("r", i, float(i), "base_link", [seen(w, pose) for w in walls],
-                         ray_origin=np.zeros(2) if rays is not None else None, rays=rays),
+            Observations(
+                "r",
+                i,
+                float(i),
+                "base_link",
+                [seen(w, pose) for w in walls],
+                ray_origin=np.zeros(2) if rays is not None else None,
+                rays=rays,
+            ),
             Pose(float(i), *pose, cov=POSE_COV),
-        )  # fmt: skip
+        )
 
 
 def along_x(y: float, x0: float, x1: float):

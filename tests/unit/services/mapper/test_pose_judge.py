@@ -31,8 +31,9 @@ FAULTS = PoseFaults(latency=0.08, heading_sd_deg=0.5, glitches=(GLITCH,), seed=3
 @pytest.fixture(scope="module")
 def faulty(scene_bags):
     """A depth camera's scene, its poses 80 ms late, 0.5 deg noisy, 3 s 12 deg and 10 cm off."""
-    return scene_bags("faulty-depth.bag", seed=3, n_frames=600, fmt="ros1", sensor="depth16",
-                      faults=FAULTS)  # fmt: skip
+    return scene_bags(
+        "faulty-depth.bag", seed=3, n_frames=600, fmt="ros1", sensor="depth16", faults=FAULTS
+    )
 
 
 def _spec(info, source: str) -> str:
@@ -74,8 +75,9 @@ def test_taken_as_they_come_the_same_poses_do_not(faulty) -> None:
 @pytest.mark.parametrize("latency", [0.03, 0.15])
 def test_the_latency_is_estimated_within_10_ms(scene_bags, latency: float) -> None:
     faults = PoseFaults(latency=latency, heading_sd_deg=0.3, seed=5)
-    info = scene_bags(f"late-{latency}.bag", seed=5, n_frames=450, fmt="ros1",
-                      sensor="laserscan", faults=faults)  # fmt: skip
+    info = scene_bags(
+        f"late-{latency}.bag", seed=5, n_frames=450, fmt="ros1", sensor="laserscan", faults=faults
+    )
     pipeline = run_bag(info.path, configured(f"player.source.pose_source={_spec(info, 'tum')}"))
     found = pipeline.mapping.judge.summary()
     score = evaluate_map(walls(pipeline.map, 3), info.plan, info.seen_counts)
@@ -102,8 +104,12 @@ def test_a_given_latency_is_used_not_estimated(faulty) -> None:
 
 # --- one judge, one room: a glitch placed, a contradiction refused --------------------------
 
-ROOM = [((-3.0, -2.0), (3.0, -2.0)), ((3.0, -2.0), (3.0, 2.0)), ((3.0, 2.0), (-3.0, 2.0)),
-        ((-3.0, 2.0), (-3.0, -2.0))]  # fmt: skip
+ROOM = [
+    ((-3.0, -2.0), (3.0, -2.0)),
+    ((3.0, -2.0), (3.0, 2.0)),
+    ((3.0, 2.0), (-3.0, 2.0)),
+    ((-3.0, 2.0), (-3.0, -2.0)),
+]
 
 
 def _seen(pose: np.ndarray, walls_seen=ROOM) -> list[WallObservation]:
@@ -117,14 +123,16 @@ def _seen(pose: np.ndarray, walls_seen=ROOM) -> list[WallObservation]:
         d = (p1 - p0) / np.linalg.norm(p1 - p0)
         foot = p0 + ((np.array([x, y]) - p0) @ d) * d
         ends = (np.array([p0, p1]) - [x, y]) @ rot
-        out.append(WallObservation(rot.T @ (foot - [x, y]), np.eye(2) * 1e-5, ends[0], ends[1],
-                                   200, 0.003))  # fmt: skip
+        out.append(
+            WallObservation(rot.T @ (foot - [x, y]), np.eye(2) * 1e-5, ends[0], ends[1], 200, 0.003)
+        )
     return out
 
 
 def _frame(stamp: float, pose: np.ndarray, walls_seen=ROOM) -> Observations:
-    return Observations("r", int(stamp * 10), stamp, "base_link", _seen(pose, walls_seen),
-                        sensor="scan")  # fmt: skip
+    return Observations(
+        "r", int(stamp * 10), stamp, "base_link", _seen(pose, walls_seen), sensor="scan"
+    )
 
 
 def _source(stamp: float, pose: np.ndarray) -> SourcePose:
@@ -172,8 +180,10 @@ def test_the_judge_goes_on_from_its_state_file_entry_exactly() -> None:
     same (same walls, same ids)."""
     judge, wall_map = PoseJudge(JudgeConfig()), WallMap()  # the latency estimated too
     poses = PoseBuffer()
-    track = [np.array([0.2 * math.cos(k / 5), 0.3 * math.sin(k / 7), 0.1 * k + 0.02 * math.sin(k)])
-             for k in range(120)]  # fmt: skip
+    track = [
+        np.array([0.2 * math.cos(k / 5), 0.3 * math.sin(k / 7), 0.1 * k + 0.02 * math.sin(k)])
+        for k in range(120)
+    ]
     for k, pose in enumerate(track):
         poses.add(Pose(k * 0.1, *map(float, pose)))
     for k, pose in enumerate(track[:80]):

@@ -98,9 +98,18 @@ class Msgs:
     def camera_info(self, stamp: float, frame: str, width: int, height: int, k: list[float]) -> Any:
         roi = self.t["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
         return self.t["sensor_msgs/msg/CameraInfo"](
-            self.header(stamp, frame), height, width, "plumb_bob", np.zeros(5),
-            np.array(k, dtype=np.float64), np.eye(3).ravel(), np.zeros(12), 0, 0, roi,
-        )  # fmt: skip
+            self.header(stamp, frame),
+            height,
+            width,
+            "plumb_bob",
+            np.zeros(5),
+            np.array(k, dtype=np.float64),
+            np.eye(3).ravel(),
+            np.zeros(12),
+            0,
+            0,
+            roi,
+        )
 
     def scan(self, stamp: float, frame: str, ranges: list[float]) -> Any:
         return self.t["sensor_msgs/msg/LaserScan"](

@@ -60,38 +60,64 @@ def header(stamp: float, frame: str) -> Any:
 
 def scan(stamp: float, frame: str = "laser") -> Any:
     return T[SCAN](
-        header=header(stamp, frame), angle_min=0.0, angle_max=1.0, angle_increment=0.5,
-        time_increment=0.0, scan_time=0.1, range_min=0.1, range_max=10.0,
-        ranges=np.array([1.0, 2.0, 3.0], dtype=np.float32), intensities=np.zeros(0, np.float32),
-    )  # fmt: skip
+        header=header(stamp, frame),
+        angle_min=0.0,
+        angle_max=1.0,
+        angle_increment=0.5,
+        time_increment=0.0,
+        scan_time=0.1,
+        range_min=0.1,
+        range_max=10.0,
+        ranges=np.array([1.0, 2.0, 3.0], dtype=np.float32),
+        intensities=np.zeros(0, np.float32),
+    )
 
 
 def cloud(stamp: float, frame: str, height: int, width: int = 4) -> Any:
     field = T["sensor_msgs/msg/PointField"]
     data = np.ones((height, width, 3), dtype=np.float32)
     return T[CLOUD](
-        header=header(stamp, frame), height=height, width=width,
+        header=header(stamp, frame),
+        height=height,
+        width=width,
         fields=[field(n, o, 7, 1) for n, o in (("x", 0), ("y", 4), ("z", 8))],
-        is_bigendian=False, point_step=12, row_step=12 * width,
-        data=data.view(np.uint8).ravel(), is_dense=False,
-    )  # fmt: skip
+        is_bigendian=False,
+        point_step=12,
+        row_step=12 * width,
+        data=data.view(np.uint8).ravel(),
+        is_dense=False,
+    )
 
 
 def image(stamp: float, frame: str, encoding: str = "16UC1") -> Any:
     data = np.full((3, 4), 1000, dtype=np.uint16).view(np.uint8).ravel()
     return T[IMAGE](
-        header=header(stamp, frame), height=3, width=4, encoding=encoding, is_bigendian=False,
-        step=8, data=data,
-    )  # fmt: skip
+        header=header(stamp, frame),
+        height=3,
+        width=4,
+        encoding=encoding,
+        is_bigendian=False,
+        step=8,
+        data=data,
+    )
 
 
 def camera_info(stamp: float, frame: str) -> Any:
     roi = T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
     k = np.array([100.0, 0, 2, 0, 100.0, 1.5, 0, 0, 1])
     return T[INFO](
-        header(stamp, frame), 3, 4, "plumb_bob", np.zeros(5), k, np.eye(3).ravel(),
-        np.zeros(12), 0, 0, roi,
-    )  # fmt: skip
+        header(stamp, frame),
+        3,
+        4,
+        "plumb_bob",
+        np.zeros(5),
+        k,
+        np.eye(3).ravel(),
+        np.zeros(12),
+        0,
+        0,
+        roi,
+    )
 
 
 def tf(stamp: float, *links: tuple[str, str], x: float = 0.1) -> Any:

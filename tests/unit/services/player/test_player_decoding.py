@@ -169,8 +169,9 @@ def camera_info(*, ros1: bool = False, width: int = WIDTH, height: int = HEIGHT)
         info = ROS2["sensor_msgs/msg/CameraInfo"]
         roi = ROS2["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
         hdr = header()
-    return info(hdr, height, width, "plumb_bob", np.zeros(5), k, np.eye(3).ravel(),
-                np.zeros(12), 0, 0, roi)  # fmt: skip
+    return info(
+        hdr, height, width, "plumb_bob", np.zeros(5), k, np.eye(3).ravel(), np.zeros(12), 0, 0, roi
+    )
 
 
 def make_depth(

@@ -73,8 +73,10 @@ def test_the_default_takes_the_one_pose_topic_of_a_bag_without_tf() -> None:
     from wallmap.services.player.pose_sources import parse_pose_source
 
     topic = SimpleNamespace
-    tracked = {"/scan": topic(msgtype="sensor_msgs/msg/LaserScan"),
-               "/vrpn/pose": topic(msgtype="geometry_msgs/msg/PoseStamped")}  # fmt: skip
+    tracked = {
+        "/scan": topic(msgtype="sensor_msgs/msg/LaserScan"),
+        "/vrpn/pose": topic(msgtype="geometry_msgs/msg/PoseStamped"),
+    }
     spec, note = default_source(parse_pose_source("tf"), tracked)
     assert str(spec) == "pose:/vrpn/pose"
     assert note is not None

@@ -20,19 +20,33 @@ IMAGE, INFO = "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo"
 
 def _route(key: str, msgtype: str) -> bytes:
     """A zenoh-bridge-ros2dds admin-space route entry, with the fields its 1.x releases give."""
-    return json.dumps({"ros2_name": "/" + key.split("/", 1)[-1], "ros2_type": msgtype,
-                       "zenoh_key_expr": key, "publication_cache_size": 0, "dds_reader": "",
-                       "priority": 5, "remote_routes": [], "local_nodes": []}).encode()  # fmt: skip
+    return json.dumps(
+        {
+            "ros2_name": "/" + key.split("/", 1)[-1],
+            "ros2_type": msgtype,
+            "zenoh_key_expr": key,
+            "publication_cache_size": 0,
+            "dds_reader": "",
+            "priority": 5,
+            "remote_routes": [],
+            "local_nodes": [],
+        }
+    ).encode()
 
 
 def test_the_bridge_s_routes_of_the_namespace_are_read_and_others_skipped() -> None:
-    values = [_route("robot1/camera/depth/image_rect_raw", IMAGE),
-              _route("robot1/camera/depth/camera_info", INFO),
-              _route("robot2/camera/depth/image_rect_raw", IMAGE),
-              b"not json", b'{"ros2_type": 3}']  # fmt: skip
+    values = [
+        _route("robot1/camera/depth/image_rect_raw", IMAGE),
+        _route("robot1/camera/depth/camera_info", INFO),
+        _route("robot2/camera/depth/image_rect_raw", IMAGE),
+        b"not json",
+        b'{"ros2_type": 3}',
+    ]
     found = from_bridge_routes(values, "/robot1/")
-    assert found == [Announced("camera/depth/image_rect_raw", IMAGE),
-                     Announced("camera/depth/camera_info", INFO)]  # fmt: skip
+    assert found == [
+        Announced("camera/depth/image_rect_raw", IMAGE),
+        Announced("camera/depth/camera_info", INFO),
+    ]
     assert len(from_bridge_routes(values, "")) == 3  # no namespace: every robot's topic
 
 

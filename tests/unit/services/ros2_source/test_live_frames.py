@@ -33,11 +33,17 @@ def _tf(stamp: float, parent: str, child: str, x: float = 0.0, yaw: float = 0.0)
 
 def _scan(stamp: float, n: int = 90):
     return T["sensor_msgs/msg/LaserScan"](
-        header=_header(stamp, "laser"), angle_min=-math.pi / 4, angle_max=math.pi / 4,
-        angle_increment=(math.pi / 2) / (n - 1), time_increment=0.0, scan_time=0.0,
-        range_min=0.1, range_max=10.0, ranges=np.full(n, 2.0, np.float32),
+        header=_header(stamp, "laser"),
+        angle_min=-math.pi / 4,
+        angle_max=math.pi / 4,
+        angle_increment=(math.pi / 2) / (n - 1),
+        time_increment=0.0,
+        scan_time=0.0,
+        range_min=0.1,
+        range_max=10.0,
+        ranges=np.full(n, 2.0, np.float32),
         intensities=np.zeros(0, np.float32),
-    )  # fmt: skip
+    )
 
 
 def _live(pose: str = "tf") -> tuple[LiveFrames, list[tuple[str, str]]]:
@@ -198,8 +204,9 @@ def _odometry(stamp: float, child: str, pitch: float):
     twist = T["geometry_msgs/msg/TwistWithCovariance"](
         twist=T["geometry_msgs/msg/Twist"](linear=still, angular=still), covariance=np.zeros(36)
     )
-    return T["nav_msgs/msg/Odometry"](header=_header(stamp, "odom"), child_frame_id=child,
-                                      pose=pose, twist=twist)  # fmt: skip
+    return T["nav_msgs/msg/Odometry"](
+        header=_header(stamp, "odom"), child_frame_id=child, pose=pose, twist=twist
+    )
 
 
 def test_an_odometry_topic_names_the_robot_frame_and_its_tilt_goes_into_the_mount() -> None:

@@ -13,8 +13,9 @@ T = ros2_typestore().types
 
 
 def _stamped_pose():
-    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=3, nanosec=0),
-                                      frame_id="map")  # fmt: skip
+    header = T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=3, nanosec=0), frame_id="map"
+    )
     point = T["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=0.0)
     q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
     return header, T["geometry_msgs/msg/Pose"](position=point, orientation=q)

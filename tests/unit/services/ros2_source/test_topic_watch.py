@@ -6,8 +6,14 @@ from wallmap.services.ros2_source.topic_watch import TopicWatch
 
 
 def test_rates_silences_and_what_never_came() -> None:
-    watch = TopicWatch({"sensor": "robot1/scan", "tf": "robot1/tf", "tf_static": "robot1/tf_static",
-                        "pose": "robot1/odom"})  # fmt: skip
+    watch = TopicWatch(
+        {
+            "sensor": "robot1/scan",
+            "tf": "robot1/tf",
+            "tf_static": "robot1/tf_static",
+            "pose": "robot1/odom",
+        }
+    )
     for k in range(50):  # 10 Hz for 5 s
         watch.heard("sensor", 100.0 + 0.1 * k)
         watch.heard("tf", 100.0 + 0.1 * k)
