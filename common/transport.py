@@ -57,17 +57,24 @@ class ZenohSettings:
     wait_for_router: float = field(default=0.0, metadata={"config": False})
 
     def __post_init__(self) -> None:
-        prefix = self.prefix.strip("/")
-        if not prefix or any(c in prefix for c in "*$?#"):
-            msg = (
-                f"invalid prefix {self.prefix!r} (--prefix, zenoh.prefix): use a plain key "
-                "expression such as robot1/run2"
-            )
-            raise TransportError(msg)
+        prefix = plain_prefix(self.prefix, "prefix", "--prefix, zenoh.prefix")
         if not self.connect:
             msg = "no endpoint to connect to"
             raise TransportError(msg)
         object.__setattr__(self, "prefix", prefix)
+
+
+def plain_prefix(value: str, what: str, where: str) -> str:
+    """A key prefix without its outer slashes.
+
+    TransportError for one that is empty or holds a wildcard: a prefix names one robot's keys,
+    not a pattern.
+    """
+    prefix = value.strip("/")
+    if not prefix or any(c in prefix for c in "*$?#"):
+        msg = f"invalid {what} {value!r} ({where}): use a plain key expression such as robot1/run2"
+        raise TransportError(msg)
+    return prefix
 
 
 def zenoh_reason(err: Exception) -> str:

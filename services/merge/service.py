@@ -39,6 +39,7 @@ from wallmap.common.transport import (
     ZenohSettings,
     key_expression,
     open_session,
+    plain_prefix,
 )
 from wallmap.services.mapper.ros2_out import RoomMarkers, Ros2Outlet
 from wallmap.services.merge.fleet import Fleet
@@ -50,6 +51,7 @@ QUERY_TIMEOUT = 2.0
 
 def run(settings: ZenohSettings, robots: list[str], stop: threading.Event) -> Stats:
     """Serve the fleet of ``robots`` (the first one's frame the fleet's) until ``stop``."""
+    robots = [plain_prefix(robot, "robot prefix", "--robots") for robot in robots]
     for robot in robots:
         key_expression(robot, "--robots")
     if settings.prefix in robots:
