@@ -366,6 +366,31 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"wallmap {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    _add_service_commands(sub)
+    _add_map_commands(sub)
+    _add_scene_command(sub)
+    p = add_command(
+        sub, "demo", "run the pipeline on the sample bag shipped with wallmap", _cmd_demo
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("wallmap-demo.png"), help="picture (.png or .svg)"
+    )
+    add_command(
+        sub,
+        "config",
+        "print the effective configuration as TOML (every flag, --config, "
+        "--set): a file for --config",
+        _cmd_config,
+        *ALL,
+    )
+    add_foxglove_commands(sub)
+    add_doctor_command(sub)
+    add_view_command(sub)
+    return parser
+
+
+def _add_service_commands(sub: Any) -> None:
+    """The services, one per process: router, player, detector, mapper, odometry, merge, ros2."""
     p = add_command(sub, "router", "a Zenoh router", _cmd_router, ROUTER_ZENOH)
     p.add_argument(
         "--listen", action="append", metavar="ENDPOINT", help=f"default {DEFAULT_CONNECT}"
@@ -404,6 +429,11 @@ def build_parser() -> argparse.ArgumentParser:
         HISTORY,
         ZENOH,
     )
+    _add_more_service_commands(sub)
+
+
+def _add_more_service_commands(sub: Any) -> None:
+    """The services beyond the core four: odometry, merge (a fleet), ros2 (a live robot)."""
     add_command(
         sub,
         "odometry",
@@ -435,6 +465,9 @@ def build_parser() -> argparse.ArgumentParser:
         ZENOH,
     )
 
+
+def _add_map_commands(sub: Any) -> None:
+    """What reads or makes a map: query, status, up, plot, export."""
     p = add_command(sub, "query", "print the current wall map", _cmd_query, ZENOH)
     p.add_argument("--json", action="store_true", help="the contract's JSON instead of a table")
     _add_map_filters(p)
@@ -472,6 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", type=Path, metavar="OUT", help="output file")
     _add_map_filters(p)
 
+
+def _add_scene_command(sub: Any) -> None:
+    """``wallmap scene``: a generated building's bag and its ground truth."""
     p = add_command(
         sub, "scene", "write a bag of a generated scene, with its ground truth", _cmd_scene
     )
@@ -505,6 +541,11 @@ def build_parser() -> argparse.ArgumentParser:
         "map frame at the robot's first pose; the ground truth's map_in_world places that "
         "frame in the plan's",
     )
+    _add_pose_fault_flags(p)
+
+
+def _add_pose_fault_flags(p: argparse.ArgumentParser) -> None:
+    """``wallmap scene``'s poses as real sources give them: late, noisy, at times wrong."""
     p.add_argument(
         "--pose-latency",
         type=finite,
@@ -535,25 +576,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="a stretch of wrong poses: from START s for DUR s, DEG degrees and M "
         "metres off (repeatable)",
     )
-
-    p = add_command(
-        sub, "demo", "run the pipeline on the sample bag shipped with wallmap", _cmd_demo
-    )
-    p.add_argument(
-        "--out", type=Path, default=Path("wallmap-demo.png"), help="picture (.png or .svg)"
-    )
-    add_command(
-        sub,
-        "config",
-        "print the effective configuration as TOML (every flag, --config, "
-        "--set): a file for --config",
-        _cmd_config,
-        *ALL,
-    )
-    add_foxglove_commands(sub)
-    add_doctor_command(sub)
-    add_view_command(sub)
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:

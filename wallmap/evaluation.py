@@ -188,6 +188,36 @@ def _one_line(a: Wall, b: Wall) -> bool:
     return gap <= ONE_LINE_GAP
 
 
+def _matches(
+    mapped: list[dict[str, Any]], groups: list[list[Wall]], max_angle_deg: float, max_offset: float
+) -> tuple[dict[int, tuple[float, float, float]], dict[int, int], list[Any]]:
+    """Each mapped wall against each physical wall (its pieces).
+
+    Returns the best (smallest offset) match per physical wall as (angle, offset, end-point
+    error); how many mapped walls match each (a mapped wall matching two of its pieces counts
+    once); and the mapped walls matching none.
+    """
+    best: dict[int, tuple[float, float, float]] = {}
+    match_count = dict.fromkeys(range(len(groups)), 0)
+    unmatched_mapped: list[Any] = []
+    for index, wall in enumerate(mapped):
+        matched = False
+        for group, pieces in enumerate(groups):
+            hit = False
+            for truth in pieces:
+                errors = match_errors(wall, truth)
+                if errors is None or errors[0] > max_angle_deg or errors[1] > max_offset:
+                    continue
+                hit = True
+                if group not in best or errors[1] < best[group][1]:
+                    best[group] = (*errors, endpoint_error(wall, truth))
+            matched |= hit
+            match_count[group] += int(hit)
+        if not matched:
+            unmatched_mapped.append(wall.get("id", index))
+    return best, match_count, unmatched_mapped
+
+
 def evaluate_map(
     mapped: Sequence[WallRecord | Mapping[str, Any]],
     plan: FloorPlan,
@@ -213,27 +243,7 @@ def evaluate_map(
     """
     mapped = [w.to_map() if isinstance(w, WallRecord) else w for w in mapped]
     groups = physical_walls(plan)
-    # Best (smallest offset) match per physical wall as (angle, offset, end-point error), and
-    # how many mapped walls match it (a mapped wall matching two of its pieces counts once).
-    best: dict[int, tuple[float, float, float]] = {}
-    match_count = dict.fromkeys(range(len(groups)), 0)
-    unmatched_mapped: list[Any] = []
-    for index, wall in enumerate(mapped):
-        matched = False
-        for group, pieces in enumerate(groups):
-            hit = False
-            for truth in pieces:
-                errors = match_errors(wall, truth)
-                if errors is None or errors[0] > max_angle_deg or errors[1] > max_offset:
-                    continue
-                hit = True
-                if group not in best or errors[1] < best[group][1]:
-                    best[group] = (*errors, endpoint_error(wall, truth))
-            matched |= hit
-            match_count[group] += int(hit)
-        if not matched:
-            unmatched_mapped.append(wall.get("id", index))
-
+    best, match_count, unmatched_mapped = _matches(mapped, groups, max_angle_deg, max_offset)
     required = [
         group
         for group, pieces in enumerate(groups)

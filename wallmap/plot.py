@@ -267,21 +267,8 @@ def render_map(
     cloud = np.zeros((0, 2)) if points is None else np.asarray(points, dtype=float)
     content = [*paths, cloud, *(np.vstack([*w.pieces, *w.bands]) for w in walls)]
     content += [np.asarray(r["polygon"], dtype=float) for r in room_list]
-    everything = np.vstack([c.reshape(-1, 2) for c in content])
-    if len(everything) == 0:
-        everything = np.array([[-1.0, -1.0], [1.0, 1.0]])
-    lo, hi = everything.min(axis=0) - WORLD_PAD, everything.max(axis=0) + WORLD_PAD
-    span = np.maximum(hi - lo, 1e-6)
-    scale = min((size - 2 * MARGIN) / span[0], (size - 2 * MARGIN - TITLE_HEIGHT) / span[1])
-    minimum = max(size // 3, 2 * MARGIN + 1)  # room for the title and the scale bar
-    width = max(math.ceil(span[0] * scale) + 2 * MARGIN, minimum)
-    height = max(math.ceil(span[1] * scale) + 2 * MARGIN + TITLE_HEIGHT, minimum)
-    inner_x = (width - span[0] * scale) / 2
-    inner_y = TITLE_HEIGHT + (height - TITLE_HEIGHT - span[1] * scale) / 2
-    offset = (inner_x - lo[0] * scale, inner_y + hi[1] * scale)
-
     title = f"{len(walls)} walls, {reply.frames} frames, {reply.observations} observations"
-    drawing = Drawing(width, height, scale, offset, title)
+    drawing = _canvas(np.vstack([c.reshape(-1, 2) for c in content]), size, title)
     unit = size / 1000  # line widths and text grow with the picture
     items = drawing.items
     px = drawing.to_px
@@ -296,39 +283,75 @@ def render_map(
         items.extend(Fill(px(b), WALL_COLOUR, BAND_OPACITY, "band") for b in w.bands)
     for w in walls:
         items.extend(Stroke(px(g), max(1.0, 1.2 * unit), GAP_COLOUR, "gap") for g in w.gaps)
-    for k, path in enumerate(paths):
-        colour = TRAJECTORY_COLOURS[k % len(TRAJECTORY_COLOURS)]
-        if len(path) > 1:
-            items.append(Stroke(px(path), max(1.2, 1.5 * unit), colour, "trajectory"))
-        if len(path) > 0:
-            start = px(path[0])
-            items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), colour, "start"))
+    _draw_paths(drawing, paths, unit)
     for w in walls:
         items.extend(Stroke(px(p), max(2.0, 3 * unit), WALL_COLOUR, "wall") for p in w.pieces)
     for door in door_list:
         span = px(np.array([door["p0"], door["p1"]], dtype=float))
         items.append(Stroke(span, max(3.0, 5 * unit), DOOR_COLOUR, "door"))
     glyph = max(5.0, 5 * round(2 * unit))  # whole bitmap-font pixels in the PNG
-    for room in room_list:
+    _draw_labels(drawing, walls, room_list, glyph, unit)
+    _draw_scale_bar(drawing, glyph, unit)
+    return drawing
+
+
+def _canvas(everything: Array, size: int, title: str) -> Drawing:
+    """A drawing that holds ``everything`` (map points), its longer side about ``size`` px."""
+    if len(everything) == 0:
+        everything = np.array([[-1.0, -1.0], [1.0, 1.0]])
+    lo, hi = everything.min(axis=0) - WORLD_PAD, everything.max(axis=0) + WORLD_PAD
+    span = np.maximum(hi - lo, 1e-6)
+    scale = min((size - 2 * MARGIN) / span[0], (size - 2 * MARGIN - TITLE_HEIGHT) / span[1])
+    minimum = max(size // 3, 2 * MARGIN + 1)  # room for the title and the scale bar
+    width = max(math.ceil(span[0] * scale) + 2 * MARGIN, minimum)
+    height = max(math.ceil(span[1] * scale) + 2 * MARGIN + TITLE_HEIGHT, minimum)
+    inner_x = (width - span[0] * scale) / 2
+    inner_y = TITLE_HEIGHT + (height - TITLE_HEIGHT - span[1] * scale) / 2
+    offset = (inner_x - lo[0] * scale, inner_y + hi[1] * scale)
+    return Drawing(width, height, scale, offset, title)
+
+
+def _draw_paths(drawing: Drawing, paths: list[Array], unit: float) -> None:
+    """Each path (a fleet's robots': each in its own colour) and a dot at its start."""
+    for k, path in enumerate(paths):
+        colour = TRAJECTORY_COLOURS[k % len(TRAJECTORY_COLOURS)]
+        if len(path) > 1:
+            drawing.items.append(
+                Stroke(drawing.to_px(path), max(1.2, 1.5 * unit), colour, "trajectory")
+            )
+        if len(path) > 0:
+            start = drawing.to_px(path[0])
+            drawing.items.append(Dot((start[0], start[1]), max(2.5, 4 * unit), colour, "start"))
+
+
+def _draw_labels(
+    drawing: Drawing, walls: list[_Wall], rooms: list[dict[str, Any]], glyph: float, unit: float
+) -> None:
+    """Each room's id and area at its centroid; each wall's id beside its middle."""
+    px = drawing.to_px
+    for room in rooms:
         centre = px(np.asarray(room["centroid"], dtype=float))
         text = f"R{room['id']} {room['area']:.1f} m"
-        items.append(Label((centre[0], centre[1]), text, glyph, LABEL_COLOUR, "room-label"))
+        drawing.items.append(Label((centre[0], centre[1]), text, glyph, LABEL_COLOUR, "room-label"))
     for w in walls:
         ends = np.array([w.pieces[0][0], w.pieces[-1][1]])
         middle = px(ends.mean(axis=0))
         side = np.array([w.normal[0], -w.normal[1]])  # pixel y points down
         centre = middle + side * (glyph + 3 * unit)
-        items.append(Label((centre[0], centre[1]), str(w.id), glyph, LABEL_COLOUR, "label"))
+        drawing.items.append(Label((centre[0], centre[1]), str(w.id), glyph, LABEL_COLOUR, "label"))
 
-    length = _scale_bar_length(scale, width)
-    x0, y = MARGIN, height - MARGIN / 2
-    x1 = x0 + length * scale
-    items.append(Stroke(np.array([[x0, y], [x1, y]]), max(2.0, 2 * unit), SCALE_COLOUR, "scale"))
+
+def _draw_scale_bar(drawing: Drawing, glyph: float, unit: float) -> None:
+    """A scale bar of a round length, bottom left."""
+    length = _scale_bar_length(drawing.scale, drawing.width)
+    x0, y = MARGIN, drawing.height - MARGIN / 2
+    x1 = x0 + length * drawing.scale
+    bar = np.array([[x0, y], [x1, y]])
+    drawing.items.append(Stroke(bar, max(2.0, 2 * unit), SCALE_COLOUR, "scale"))
     text = f"{length:g} m"
-    items.append(
+    drawing.items.append(
         Label((x1 + 6 + 0.8 * glyph * len(text) / 2, y), text, glyph, SCALE_COLOUR, "scale")
     )
-    return drawing
 
 
 # --- SVG --------------------------------------------------------------------------------------

@@ -112,14 +112,36 @@ def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
     assert report["summary"]["errorCount"] == 1, report["generalDiagnostics"][:5]
 
 
-def test_no_function_in_common_or_services_is_longer_than_60_lines() -> None:
-    """Readable top to bottom: a function that does not fit on a screen does several jobs."""
-    long = [
-        f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1})"
-        for folder in ("common", "services")
+# Longer for now, each for a reason: the scene generator draws its random numbers in one fixed
+# order, and splitting these must keep every generated scene (and with them every accuracy
+# table) as it is: issue 30's scene-writer work, checked scene by scene.
+LONG_FOR_NOW = {
+    "wallmap/scene/bags.py write_scene_bag",
+    "wallmap/scene/floorplan.py _try_plan",
+    "wallmap/scene/floorplan.py _try_corridor",
+    "wallmap/scene/render.py render_depth",
+    "wallmap/scene/trajectory.py generate_trajectory",
+}
+
+
+def test_no_function_is_longer_than_60_lines() -> None:
+    """Readable top to bottom: a function that does not fit on a screen does several jobs.
+
+    Over the pure code, the services and the command (``wallmap/``), but for ``LONG_FOR_NOW``.
+    """
+    found = {
+        f"{path.relative_to(ROOT)} {node.name}": node.end_lineno - node.lineno + 1
+        for folder in ("common", "services", "wallmap")
         for path in (ROOT / folder).rglob("*.py")
+        if path.relative_to(ROOT).parts[1:2] not in (("common",), ("services",))  # the links
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
-        and node.end_lineno - node.lineno + 1 > 60
-    ]
+    }
+    long = sorted(
+        f"{name} ({n})" for name, n in found.items() if n > 60 and name not in LONG_FOR_NOW
+    )
     assert not long, long
+    still = {name for name in LONG_FOR_NOW if found.get(name, 0) > 60}
+    assert still == LONG_FOR_NOW, (
+        f"no longer long: take them off LONG_FOR_NOW {LONG_FOR_NOW - still}"
+    )
