@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -145,3 +146,25 @@ def test_no_function_is_longer_than_60_lines() -> None:
     assert still == LONG_FOR_NOW, (
         f"no longer long: take them off LONG_FOR_NOW {LONG_FOR_NOW - still}"
     )
+
+
+def test_a_checkout_without_its_links_says_so_at_import(tmp_path: Path) -> None:
+    """A clone where git made no symbolic links has text files for wallmap/common and
+    wallmap/services: ``import wallmap`` says what happened and what to do, in one error."""
+    package = tmp_path / "wallmap"
+    package.mkdir()
+    (package / "__init__.py").write_text((ROOT / "wallmap" / "__init__.py").read_text())
+    (package / "common").write_text("../common")  # what git writes for a link it cannot make
+    (package / "services").write_text("../services")
+    done = subprocess.run(
+        [sys.executable, "-c", "import wallmap"],
+        cwd=tmp_path,
+        env={"PATH": os.environ.get("PATH", ""), "PYTHONPATH": str(tmp_path)},
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 1
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("ImportError: wallmap/common is not a folder"), done.stderr
+    assert "core.symlinks=true" in last
