@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import zenoh
 
 ROOT = Path(__file__).resolve().parents[1]  # the checkout
 REAL_DATA = ROOT.parent / "shared" / "data" / "real"
@@ -68,6 +69,18 @@ def assert_clean_exit(
     assert crash is None, f"{name} crashed ({crash}):\n{output[-4000:]}"
     if expect is not None:
         assert code == expect, f"{name} exited {code}, not {expect}:\n{output[-4000:]}"
+
+
+def ask_zenoh(endpoint: str, key: str, timeout: float = 5.0) -> bytes:
+    """The first answer to ``key``, asked through a client session of the test's own."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(config) as session:
+        for reply in session.get(key, timeout=timeout):
+            return reply.ok.payload.to_bytes()
+    raise AssertionError(f"nothing answered {key} at {endpoint}")
 
 
 def run_wallmap(

@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-import zenoh
-from conftest import ROOT, Stack, free_port, run_wallmap, wait_for_port
+from conftest import ROOT, Stack, ask_zenoh, free_port, run_wallmap, wait_for_port
 from live_robot import mapped, play_to_the_source
 
 from wallmap.common.codec import decode
@@ -316,14 +315,7 @@ def test_compose_live_profile_maps_a_live_robot(tmp_path):
 
 def fleet_robots(endpoint: str) -> dict[str, dict]:
     """``fleet/robots`` (where each robot's map frame lies), asked through a session of our own."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(config) as session:
-        for reply in session.get("fleet/robots", timeout=5.0):
-            return {r["prefix"]: r for r in decode(reply.ok.payload.to_bytes())["robots"]}
-    raise AssertionError("no merge service answered fleet/robots")
+    return {r["prefix"]: r for r in decode(ask_zenoh(endpoint, "fleet/robots"))["robots"]}
 
 
 def test_compose_fleet_profile_merges_two_robots(tmp_path: Path) -> None:

@@ -20,8 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
-from conftest import Stack, free_port, run_wallmap, wait_for_port
+from conftest import Stack, ask_zenoh, free_port, run_wallmap, wait_for_port
 
 from wallmap.common.codec import decode
 from wallmap.evaluation import evaluate_map
@@ -60,18 +59,6 @@ def _page(port: int) -> dict:
 
 def _ids(body: dict) -> set[int]:
     return {w["id"] for w in body.get("walls", ())}
-
-
-def _ask(endpoint: str, key: str) -> bytes:
-    """The first answer to ``key``, asked through a session of our own."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(config) as session:
-        for reply in session.get(key, timeout=5.0):
-            return reply.ok.payload.to_bytes()
-    raise AssertionError(f"nothing answered {key}")
 
 
 def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
@@ -118,8 +105,12 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
         while (fleet := _query(at_a, "--prefix", "F"))["frames"] < sum(frames.values()):
             assert time.monotonic() < deadline, (fleet["frames"], frames, merge.output())
             time.sleep(0.5)
-        robots = {r["prefix"]: r for r in decode(_ask(at_b, "F/robots"))["robots"]}  # through B
-        markers = ros2_out.decode(_ask(at_a, "F/markers"), "visualization_msgs/msg/MarkerArray")
+        robots = {
+            r["prefix"]: r for r in decode(ask_zenoh(at_b, "F/robots"))["robots"]
+        }  # through B
+        markers = ros2_out.decode(
+            ask_zenoh(at_a, "F/markers"), "visualization_msgs/msg/MarkerArray"
+        )
         rooms = _query(at_a, "--prefix", "F", "--rooms")
         deadline = time.monotonic() + 15  # the live page follows the fleet's updates
         served = {w["id"] for w in fleet["walls"]}

@@ -18,8 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
-from conftest import REAL_DATA, Stack, free_port, run_wallmap, wait_for_port
+from conftest import REAL_DATA, Stack, ask_zenoh, free_port, run_wallmap, wait_for_port
 
 from wallmap.common.codec import decode
 
@@ -30,14 +29,7 @@ MOCAP = "pose:/vrpn_client_node/jackal/pose"
 
 
 def _robots(endpoint: str) -> dict[str, dict]:
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(config) as session:
-        for reply in session.get("F/robots", timeout=5.0):
-            return {r["prefix"]: r for r in decode(reply.ok.payload.to_bytes())["robots"]}
-    raise AssertionError("no merge service answered")
+    return {r["prefix"]: r for r in decode(ask_zenoh(endpoint, "F/robots"))["robots"]}
 
 
 def _query(endpoint: str, prefix: str) -> dict:
