@@ -268,7 +268,7 @@ class PoseCorrector:
             "odom": None if self.odom is None else self.odom.tolist(),
             "fixes": self.fixes,
             "alone": self.alone,
-            "window": self.ids,
+            "window": list(self.ids),  # a copy: the state file is written after the lock
             "seen": [self.frame - f for f in self.seen],
         }
 

@@ -107,3 +107,17 @@ def test_a_line_is_turned_about_its_foot_by_end_sd_over_its_length(start, end) -
     middle = 0.5 * (start + end)  # along the wall from its foot (0, 1)
     across_middle = np.array([1.0, -middle])  # offset there: rho - t theta (direction -x)
     assert across_middle @ extra @ across_middle == pytest.approx((middle * turn) ** 2)
+
+
+def test_what_a_state_file_keeps_is_a_copy_the_mapping_does_not_change() -> None:
+    """The state file is written after the map's lock is let go, while frames go on: the window
+    of walls it keeps must be the one its joint state was taken with (a live list once made a
+    restarted mapper refuse its state file)."""
+    x = np.zeros(5 + 2 * 2)
+    corrector = PoseCorrector(
+        SlamConfig(enabled=True), x, np.eye(len(x)), np.zeros(3), 0, 0, ids=[3, 7], seen=[0, 0]
+    )
+    kept = corrector.to_json()
+    corrector.ids.append(9)  # the mapping goes on: a wall comes into the window
+    restored = PoseCorrector.from_json(kept, SlamConfig(enabled=True))
+    assert restored.ids == [3, 7]
