@@ -165,6 +165,14 @@ class Stack:
         self.services.append(service)
         return service
 
+    def start_linked_routers(self, other: str) -> None:
+        """Router A on the stack's endpoint, router B on ``other`` joined to A (a fleet's
+        mesh, on loopback); both ready."""
+        self.start("router-a", "router", "--listen", self.endpoint)
+        wait_for_port(int(self.endpoint.rsplit(":", 1)[1]))
+        self.start("router-b", "router", "--listen", other, "--connect", self.endpoint)
+        wait_for_port(int(other.rsplit(":", 1)[1]))
+
     def run(
         self, *args: str, timeout: float = 300.0, expect: int | None = 0
     ) -> subprocess.CompletedProcess[str]:

@@ -71,14 +71,10 @@ def test_two_robots_on_two_routers_make_one_map(tmp_path: Path) -> None:
             bag_b, **scene, fmt="ros1", sensor="laserscan", reverse=True, own_frame=True
         ),
     }
-    port_a, port_b = free_port(), free_port()
-    at_a, at_b = f"tcp/127.0.0.1:{port_a}", f"tcp/127.0.0.1:{port_b}"
+    at_a, at_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     stack = Stack(tmp_path, at_a, "unused")
     try:
-        stack.start("router-a", "router", "--listen", at_a)
-        wait_for_port(port_a)
-        stack.start("router-b", "router", "--listen", at_b, "--connect", at_a)
-        wait_for_port(port_b)
+        stack.start_linked_routers(at_b)
         for robot, endpoint in (("A", at_a), ("B", at_b)):
             for service in ("mapper", "detector"):
                 stack.start(f"{service}-{robot}", service, "--connect", endpoint, "--prefix", robot)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REAL_DATA, Stack, ask_zenoh, free_port, run_wallmap, wait_for_port
+from conftest import REAL_DATA, Stack, ask_zenoh, free_port, run_wallmap
 
 from wallmap.common.codec import decode
 
@@ -40,14 +40,10 @@ def _query(endpoint: str, prefix: str) -> dict:
 def test_the_jackal_arena_as_two_robots_is_one_map_of_six_walls(tmp_path: Path) -> None:
     if not JACKAL.exists():
         pytest.skip(f"real recording {JACKAL} is absent (shared data not mounted beside the repo)")
-    port_a, port_b = free_port(), free_port()
-    at_a, at_b = f"tcp/127.0.0.1:{port_a}", f"tcp/127.0.0.1:{port_b}"
+    at_a, at_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     stack = Stack(tmp_path, at_a, "unused")
     try:
-        stack.start("router-a", "router", "--listen", at_a)
-        wait_for_port(port_a)
-        stack.start("router-b", "router", "--listen", at_b, "--connect", at_a)
-        wait_for_port(port_b)
+        stack.start_linked_routers(at_b)
         for robot, endpoint, services in (
             ("A", at_a, ("mapper", "detector")),
             ("B", at_b, ("mapper", "detector", "odometry")),
