@@ -4,11 +4,11 @@ Each robot maps in its own frame; ``common.map_alignment`` finds where that fram
 fleet's (the first robot's). Here each robot's walls are moved there (``place``: the line by the
 measurement model seen from the fleet's origin, its covariance through both Jacobians, the
 frame's uncertainty included), then walls of different robots that are one physical wall are
-fused (``fuse_walls``): on one line (``parallel``, ``offset``) and overlapping or with a gap of at
-most ``join_gap`` along it. Two walls of one robot are fused only as pieces of one line, apart
-along it, that another robot saw as one wall; never two that overlap (two faces of a thin wall).
-A fused wall's line combines its
-members in information form (``ekf.fuse``), its segments are theirs projected onto it and joined.
+fused (``fuse_walls``): on one line (``parallel``, ``offset`` where they meet) and overlapping
+or with a gap of at most ``join_gap`` along it. Two walls of one robot are fused only as pieces
+of one line, apart along it, that another robot saw as one wall; never two that overlap (two
+faces of a thin wall). A fused wall's line combines its members in information form
+(``ekf.fuse``), its segments are theirs projected onto it and joined.
 
 Fleet ids stay while the maps grow (``FleetIds``): a fused wall takes the id most of its
 sources had; ids are never reused, and one merged away is reported as a merge.
@@ -42,11 +42,12 @@ class FuseConfig:
 
     Attributes:
         parallel: largest angle (deg) between them.
-        offset: farthest (m) each end of one may lie from the other's line.
+        offset: farthest (m) one's line may lie from the other's, at the middle of the stretch
+            they share (or of the gap between them).
         join_gap: longest gap (m) along the line between their extents.
     """
 
-    parallel: float = 5.0
+    parallel: float = 8.0
     offset: float = 0.12
     join_gap: float = 1.0
 
@@ -110,18 +111,25 @@ def group_walls(walls: Sequence[tuple[str, WallRecord]], config: FuseConfig) -> 
     normal = np.stack([-unit[:, 1], unit[:, 0]], axis=1)
     rho = np.einsum("nk,nk->n", normal, a)
     cos = np.abs(unit @ unit.T)
-    off = np.maximum(np.abs(a @ normal.T - rho), np.abs(b @ normal.T - rho))  # [j, i]: j from i
+    a_across = a @ normal.T  # [j, i]: how far j's first end lies across i's normal
+    off = np.maximum(np.abs(a_across - rho), np.abs(b @ normal.T - rho))  # [j, i]: j from i
     along_a, along_b = (
         a @ unit.T - np.einsum("nk,nk->n", a, unit),
         b @ unit.T - np.einsum("nk,nk->n", a, unit),
     )
     low, high = np.minimum(along_a, along_b), np.maximum(along_a, along_b)  # j along i's line
     gap = np.maximum(low - length[None, :], -high)  # > 0: apart along the line
+    # The lines' distance at the middle of the stretch they share (or of the gap between them),
+    # not at the ends: an end of a long wall placed a degree or two off (a robot's odometry
+    # drifted while it saw that wall) lies well off the other's line while the wall is the same.
+    middle = 0.5 * (np.maximum(low, 0.0) + np.minimum(high, length[None, :]))  # [j, i]
+    # [j, i]: j's line from the point ``middle`` along i's line, a_i + middle unit_i.
+    mid_off = np.abs(a_across.T - rho[:, None] + middle * (unit @ normal.T).T)
     robot = np.array([r for r, _ in walls])
     ok = (cos >= math.cos(math.radians(config.parallel))) & (gap <= config.join_gap)
-    ok &= (off <= config.offset) & (config.offset >= off.T) & (robot[:, None] != robot[None, :])
+    ok &= (mid_off <= config.offset) & (robot[:, None] != robot[None, :])
     i, j = np.nonzero(np.triu(ok & ok.T, 1))
-    order = np.argsort(np.maximum(off[j, i], off[i, j]), kind="stable")
+    order = np.argsort(np.maximum(mid_off[j, i], mid_off[i, j]), kind="stable")
     owner = list(range(n))
     members = {k: [k] for k in range(n)}
     # Two walls of one robot in one group only as pieces of one line, apart along it (a wall the
