@@ -1,28 +1,27 @@
-"""Pictures of a map reply, top-down in the map frame, as PNG or SVG, without a plotting library.
+"""Pictures of a map reply, top-down in the map frame, as PNG (by Pillow) or SVG (by hand).
 
 ``render_map`` lays the picture out once, in pixels, as a list of primitives (filled polygons,
 strokes, dots, labels); the PNG and SVG writers only paint those, so both show the same thing:
 each wall (its segments, thin lines over the gaps between them), its 2-sigma band, its id, the
 trajectory with a dot at its start, a scale bar and (SVG only) a title with the counts.
 
-The PNG rasteriser fills polygons by scanlines: every shape, a thick line included, is a polygon,
-so one vectorised pass per layer paints all of them. There is no anti-aliasing.
+The PNG is painted with Pillow's ImageDraw on a canvas a few times larger than the picture,
+then averaged down to it: anti-aliased edges without a plotting library's weight.
 """
 
 from __future__ import annotations
 
 import functools
+import io
 import itertools
 import math
-import struct
-import zlib
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
+from PIL import Image, ImageColor, ImageDraw, ImageFilter, ImageFont, features
 
 from wallmap.arg_types import picture_problem
 from wallmap.common.map_records import MapReply, WallRecord
@@ -124,7 +123,9 @@ class Drawing:
 
     def to_png(self) -> bytes:
         """The picture as an RGB PNG file."""
-        return encode_png(rasterise(self))
+        out = io.BytesIO()
+        _picture(self).save(out, "PNG")
+        return out.getvalue()
 
 
 # --- the band ---------------------------------------------------------------------------------
@@ -289,7 +290,7 @@ def render_map(
     for door in door_list:
         span = px(np.array([door["p0"], door["p1"]], dtype=float))
         items.append(Stroke(span, max(3.0, 5 * unit), DOOR_COLOUR, "door"))
-    glyph = max(5.0, 5 * round(2 * unit))  # whole bitmap-font pixels in the PNG
+    glyph = max(5.0, 5 * round(2 * unit))  # digit height, px; in steps of 5, as the SVG had
     _draw_labels(drawing, walls, room_list, glyph, unit)
     _draw_scale_bar(drawing, glyph, unit)
     return drawing
@@ -408,189 +409,108 @@ def _svg(drawing: Drawing) -> str:
 
 # --- PNG --------------------------------------------------------------------------------------
 
-# 3x5 (m: 5x5) bitmap glyphs for ids and the scale bar; other characters draw as blanks.
-_FONT_ROWS = {
-    "0": ("###", "#.#", "#.#", "#.#", "###"),
-    "1": (".#.", "##.", ".#.", ".#.", "###"),
-    "2": ("###", "..#", "###", "#..", "###"),
-    "3": ("###", "..#", ".##", "..#", "###"),
-    "4": ("#.#", "#.#", "###", "..#", "..#"),
-    "5": ("###", "#..", "###", "..#", "###"),
-    "6": ("###", "#..", "###", "#.#", "###"),
-    "7": ("###", "..#", "..#", ".#.", ".#."),
-    "8": ("###", "#.#", "###", "#.#", "###"),
-    "9": ("###", "#.#", "###", "..#", "###"),
-    "-": ("...", "...", "###", "...", "..."),
-    ".": (".", ".", ".", ".", "#"),
-    "m": (".....", ".....", "####.", "#.#.#", "#.#.#"),
-    "R": ("##.", "#.#", "##.", "#.#", "#.#"),
-    " ": ("..", "..", "..", "..", ".."),
-}
-_FONT = {c: np.array([[ch == "#" for ch in row] for row in rows]) for c, rows in _FONT_ROWS.items()}
+# The canvas is painted this many times larger, then averaged down: that average is the
+# anti-aliasing (an edge pixel gets the share of it a shape covers).
+SUPERSAMPLE = 3
 
 
-def _rgb(colour: str) -> Array:
-    return np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)], dtype=np.float32) / 255
+def _canvas_xy(points: Array) -> list[float]:
+    """Drawing pixels to the supersampled canvas's, flat [x0, y0, x1, ...] as ImageDraw takes.
 
-
-def _stroke_quads(points: Array, width: float) -> Array:
-    """Each piece of a polyline as a rectangle (M, 4, 2), extended by half the width (caps)."""
-    a, b = points[:-1], points[1:]
-    length = np.hypot(*(b - a).T)[:, None]
-    along = np.where(length > 1e-9, (b - a) / np.maximum(length, 1e-9), [1.0, 0.0])
-    side = along @ _PERP.T * (width / 2)
-    a, b = a - along * (width / 2), b + along * (width / 2)
-    return np.stack([a + side, b + side, b - side, a - side], axis=1)
-
-
-def _disc(centre: tuple[float, float], radius: float) -> Array:
-    angles = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
-    return np.column_stack(
-        [centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)]
-    )
-
-
-def _scan(polygons: Array, diff: Array, rows_per_pass: int = 1 << 17) -> None:
-    """Add the spans of same-sized polygons (P, K, 2) to a row-difference image (H, W + 1).
-
-    A pixel is inside when its centre is: on each row through a polygon, the edges crossed at
-    the row's centre line, sorted, pair up into spans [enter, leave). Edges count half-open in y,
-    so a vertex on the centre line is crossed once.
+    A drawing pixel spans [i, i + 1); Pillow puts a canvas pixel's centre on its integer
+    coordinate, hence the half pixel.
     """
-    height, stride = diff.shape
-    ys = polygons[..., 1]
-    first = np.clip(np.ceil(ys.min(axis=1) - 0.5), 0, height).astype(np.int64)
-    stop = np.clip(np.ceil(ys.max(axis=1) - 0.5), 0, height).astype(np.int64)
-    counts = stop - first
-    starts = polygons
-    ends = np.roll(polygons, -1, axis=1)
-    cumulative = np.cumsum(counts)
-    begin = 0
-    while begin < len(polygons):  # in passes of about rows_per_pass rows, to bound memory
-        base = cumulative[begin] - counts[begin]
-        end = max(int(np.searchsorted(cumulative, base + rows_per_pass, side="right")), begin + 1)
-        idx = np.repeat(np.arange(begin, end), counts[begin:end])
-        rows = first[idx] + np.arange(len(idx)) - (cumulative[idx] - counts[idx] - base)
-        centre = rows[:, None] + 0.5
-        x0, y0 = starts[idx, :, 0], starts[idx, :, 1]
-        x1, y1 = ends[idx, :, 0], ends[idx, :, 1]
-        crosses = (np.minimum(y0, y1) <= centre) & (centre < np.maximum(y0, y1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = x0 + (centre - y0) * (x1 - x0) / (y1 - y0)
-        x = np.sort(np.where(crosses, x, np.inf), axis=1)
-        if x.shape[1] % 2:
-            x = np.column_stack([x, np.full(len(x), np.inf)])
-        enter, leave = x[:, 0::2], x[:, 1::2]
-        inside = np.isfinite(leave)
-        width = stride - 1
-        a = np.clip(np.ceil(enter[inside] - 0.5), 0, width).astype(np.int64)
-        b = np.clip(np.ceil(leave[inside] - 0.5), 0, width).astype(np.int64)
-        row = np.broadcast_to(rows[:, None], enter.shape)[inside]
-        keep = b > a
-        flat_size = height * stride
-        diff += np.bincount(row[keep] * stride + a[keep], minlength=flat_size).reshape(diff.shape)
-        diff -= np.bincount(row[keep] * stride + b[keep], minlength=flat_size).reshape(diff.shape)
-        begin = end
-
-
-def _coverage(polygons: Sequence[Array], height: int, width: int) -> Array:
-    """How many of the polygons cover each pixel (H, W)."""
-    diff = np.zeros((height, width + 1), dtype=np.int64)
-    by_size: dict[int, list[Array]] = {}
-    for p in polygons:
-        by_size.setdefault(len(p), []).append(p)
-    for same in by_size.values():
-        _scan(np.stack(same).astype(float), diff)
-    return np.cumsum(diff[:, :width], axis=1)
-
-
-def _paint(image: Array, count: Array, colour: str, opacity: float) -> None:
-    """Blend a colour where count > 0; n overlapping translucent shapes compound."""
-    covered = count > 0
-    alpha = (1 - (1 - opacity) ** count[covered])[:, None].astype(np.float32)
-    image[covered] += alpha * (_rgb(colour) - image[covered])
+    return (np.asarray(points, dtype=float) * SUPERSAMPLE - 0.5).ravel().tolist()
 
 
 @functools.cache
-def _glyph(char: str, pixel: int) -> Array:
-    return np.kron(_FONT.get(char, _FONT[" "]), np.ones((pixel, pixel), dtype=bool))
+def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    """Pillow's own font at ``size`` px (none need be installed); without FreeType, its bitmap."""
+    if features.check("freetype2"):
+        return ImageFont.load_default(size=size)
+    return ImageFont.load_default()
 
 
-def _text_mask(text: str, pixel: int) -> Array:
-    gap = np.zeros((5 * pixel, pixel), dtype=bool)
-    parts = [part for c in text or " " for part in (_glyph(c, pixel), gap)][:-1]
-    return np.hstack(parts)
+def _ink(
+    text: str, font: ImageFont.FreeTypeFont | ImageFont.ImageFont, margin: int, stroke: int = 0
+) -> Image.Image:
+    """The text drawn white on black ("L"), its box widened by ``margin`` px each side."""
+    left, top, right, bottom = font.getbbox(text)
+    mask = Image.new("L", (right - left + 2 * margin, bottom - top + 2 * margin))
+    ImageDraw.Draw(mask).text(
+        (margin - left, margin - top), text, 255, font, stroke_width=stroke, stroke_fill=255
+    )
+    return mask
 
 
-def _paint_text(image: Array, labels: Sequence[Label], colour: str) -> None:
-    """Labels in the bitmap font, over a one-pixel halo of background for legibility."""
-    height, width = image.shape[:2]
-    text = np.zeros((height + 2, width + 2), dtype=bool)  # one pixel of border for the halo
-    for label in labels:
-        mask = _text_mask(label.text, max(1, round(label.height / 5)))
-        x = round(label.centre[0] - mask.shape[1] / 2) + 1
-        y = round(label.centre[1] - mask.shape[0] / 2) + 1
-        x0, y0 = max(x, 0), max(y, 0)
-        x1, y1 = min(x + mask.shape[1], width + 2), min(y + mask.shape[0], height + 2)
-        if x1 > x0 and y1 > y0:
-            text[y0:y1, x0:x1] |= mask[y0 - y : y1 - y, x0 - x : x1 - x]
-    halo = np.zeros((height, width), dtype=bool)
-    for dy in range(3):
-        for dx in range(3):
-            halo |= text[dy : dy + height, dx : dx + width]
-    image[halo] = _rgb(BACKGROUND)
-    image[text[1:-1, 1:-1]] = _rgb(colour)
+def _text_masks(text: str, size: int) -> tuple[Image.Image, Image.Image]:
+    """The text's ink in a font of ``size`` px, and a halo of about a picture pixel around it.
+
+    The bitmap font (no FreeType) has one size and draws no strokes: its ink is widened by a
+    pixel at that size, then both are enlarged to about ``size``, so labels keep their place
+    and size either way.
+    """
+    font = _font(size)
+    if isinstance(font, ImageFont.FreeTypeFont):
+        pad = SUPERSAMPLE  # a picture pixel
+        return _ink(text, font, pad), _ink(text, font, pad, stroke=pad)
+    ink = _ink(text, font, 1)
+    halo = ink.filter(ImageFilter.MaxFilter(3))
+    zoom = max(1, round(size / font.getbbox("0")[3]))  # the bitmap font's line height
+    ink, halo = (
+        m.resize((m.width * zoom, m.height * zoom), Image.Resampling.NEAREST) for m in (ink, halo)
+    )
+    return ink, halo
 
 
-def _layer_key(item: Item) -> tuple[str, str, float]:
+def _paint_label(canvas: Image.Image, label: Label) -> None:
+    """The label's text centred on its point, over a halo of background (legibility).
+
+    The font size is the SVG's (1.4 x the glyph height): digits then stand ``height`` tall.
+    """
+    ink, halo = _text_masks(label.text, round(1.4 * label.height * SUPERSAMPLE))
+    x, y = _canvas_xy(label.centre)
+    left, top = round(x - ink.width / 2), round(y - ink.height / 2)
+    box = (left, top, left + ink.width, top + ink.height)
+    canvas.paste(BACKGROUND, box, halo)
+    canvas.paste(label.colour, box, ink)
+
+
+def _paint(canvas: Image.Image, draw: ImageDraw.ImageDraw, item: Item) -> None:
+    """One item on the supersampled canvas; ``draw`` blends (its mode is RGBA)."""
     if isinstance(item, Label):
-        return ("text", item.colour, 1.0)
-    return ("shape", item.colour, item.opacity if isinstance(item, Fill) else 1.0)
+        _paint_label(canvas, item)
+    elif isinstance(item, Fill):
+        alpha = round(255 * item.opacity)  # overlapping translucent fills compound
+        draw.polygon(_canvas_xy(item.points), fill=(*ImageColor.getrgb(item.colour), alpha))
+    elif isinstance(item, Stroke):
+        width = max(1, round(item.width * SUPERSAMPLE))
+        points = _canvas_xy(item.points)
+        draw.line(points, fill=item.colour, width=width, joint="curve")
+        for x, y in (points[:2], points[-2:]):  # round caps: walls meet at closed corners
+            draw.ellipse(_disc_box(x, y, width / 2), fill=item.colour)
+    else:
+        x, y = _canvas_xy(item.centre)
+        draw.ellipse(_disc_box(x, y, item.radius * SUPERSAMPLE), fill=item.colour)
 
 
-def _polygons(item: Fill | Stroke | Dot) -> list[Array]:
-    if isinstance(item, Fill):
-        return [item.points]
-    if isinstance(item, Stroke):
-        return list(_stroke_quads(item.points, item.width))
-    return [_disc(item.centre, item.radius)]
+def _disc_box(x: float, y: float, radius: float) -> tuple[float, float, float, float]:
+    return (x - radius, y - radius, x + radius, y + radius)
+
+
+def _picture(drawing: Drawing) -> Image.Image:
+    """Paint the drawing, anti-aliased: in order on a supersampled RGB canvas, averaged down."""
+    size = (drawing.width * SUPERSAMPLE, drawing.height * SUPERSAMPLE)
+    canvas = Image.new("RGB", size, BACKGROUND)
+    draw = ImageDraw.Draw(canvas, "RGBA")
+    for item in drawing.items:
+        _paint(canvas, draw, item)
+    return canvas.reduce(SUPERSAMPLE)
 
 
 def rasterise(drawing: Drawing) -> Array:
-    """Paint the drawing into an (H, W, 3) uint8 image.
-
-    Consecutive items of one colour and opacity form one layer, painted in one pass.
-    """
-    image = np.empty((drawing.height, drawing.width, 3), dtype=np.float32)
-    image[:] = _rgb(BACKGROUND)
-    for (kind, colour, opacity), group in itertools.groupby(drawing.items, key=_layer_key):
-        items = list(group)
-        if kind == "text":
-            _paint_text(image, items, colour)
-        else:
-            polygons = [p for item in items for p in _polygons(item)]
-            count = _coverage(polygons, drawing.height, drawing.width)
-            _paint(image, count, colour, opacity)
-    return np.round(image * 255).astype(np.uint8)
-
-
-def encode_png(image: Array) -> bytes:
-    """An (H, W, 3) uint8 image as an 8-bit RGB PNG (no filtering: rows are mostly flat)."""
-    height, width, _ = image.shape
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        body = kind + data
-        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
-
-    rows = np.zeros((height, 1 + 3 * width), dtype=np.uint8)  # a filter byte (0) per row
-    rows[:, 1:] = image.reshape(height, -1)
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
-        + chunk(b"IEND", b"")
-    )
+    """Paint the drawing into an (H, W, 3) uint8 image (for reading pixels)."""
+    return np.array(_picture(drawing))
 
 
 # --- files ------------------------------------------------------------------------------------

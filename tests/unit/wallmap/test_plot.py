@@ -1,13 +1,15 @@
 """Pictures (PNG, SVG) and the GeoJSON export of a map reply."""
 
+import functools
+import io
 import json
-import struct
 import time
 import xml.etree.ElementTree as ET
-import zlib
 
 import numpy as np
+import PIL.features
 import pytest
+from PIL import Image, ImageFont
 
 from wallmap import plot
 from wallmap.common.map_records import MapReply
@@ -55,31 +57,26 @@ TRAJECTORY = [[float(i), 0.1 * i - 2, 0.05 * i, 0.0] for i in range(40)]
 
 
 def read_png(data: bytes) -> np.ndarray:
-    """Decode our (unfiltered, 8-bit RGB) PNG, checking its structure on the way."""
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    pos, chunks = 8, []
-    while pos < len(data):
-        (length,) = struct.unpack(">I", data[pos : pos + 4])
-        kind, body = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + length]
-        (crc,) = struct.unpack(">I", data[pos + 8 + length : pos + 12 + length])
-        assert crc == zlib.crc32(kind + body), kind
-        chunks.append((kind, body))
-        pos += 12 + length
-    assert pos == len(data)
-    kinds = [k for k, _ in chunks]
-    assert kinds[0] == b"IHDR"
-    assert kinds[-1] == b"IEND"
-    width, height, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", chunks[0][1])
-    assert (depth, colour, interlace) == (8, 2, 0)
-    raw = zlib.decompress(b"".join(body for kind, body in chunks if kind == b"IDAT"))
-    assert len(raw) == height * (1 + 3 * width)
-    rows = np.frombuffer(raw, dtype=np.uint8).reshape(height, 1 + 3 * width)
-    assert not rows[:, 0].any()  # filter type 0 on every row
-    return rows[:, 1:].reshape(height, width, 3)
+    """Decode a PNG with Pillow, checking it is one and 8-bit RGB."""
+    with Image.open(io.BytesIO(data)) as image:
+        assert (image.format, image.mode) == ("PNG", "RGB")
+        return np.array(image)
 
 
 def rgb(colour):
     return tuple(int(colour[i : i + 2], 16) for i in (1, 3, 5))
+
+
+def mix(pixels, colour, under=plot.BACKGROUND):
+    """How much of ``colour`` over ``under`` each pixel (..., 3) is, and how far it is off that mix.
+
+    An anti-aliased edge of ``colour`` is a share t of it (its coverage) over what is below.
+    """
+    base, ink = np.array(rgb(under), float), np.array(rgb(colour), float)
+    pixels = np.asarray(pixels, float)
+    t = (pixels - base) @ (ink - base) / ((ink - base) @ (ink - base))
+    off = np.linalg.norm(pixels - (base + t[..., None] * (ink - base)), axis=-1)
+    return t, off
 
 
 def test_png_is_valid_and_walls_are_where_they_should_be(tmp_path):
@@ -97,11 +94,60 @@ def test_png_is_valid_and_walls_are_where_they_should_be(tmp_path):
     col, row = np.round(drawing.to_px([2.5, 2.0]) - 0.5).astype(int)
     assert tuple(image[row, col]) == rgb(plot.BACKGROUND)
     assert tuple(image[2, 2]) == rgb(plot.BACKGROUND)
-    # the doorway of wall 2 is a thin gap line, not wall
+    # the doorway of wall 2 is a thin gap line, not wall: across it, mostly gap colour
     col, row = np.round(drawing.to_px([0.0, 4.0]) - 0.5).astype(int)
-    assert tuple(image[row, col]) == rgb(plot.GAP_COLOUR)
+    t, off = mix(image[row - 2 : row + 3, col], plot.GAP_COLOUR)
+    assert t.max() > 0.5
+    assert off.max() < 3
     # the trajectory's pixels are there
-    assert (image == rgb(plot.TRAJECTORY_COLOUR)).all(axis=2).sum() > 50
+    t, off = mix(image, plot.TRAJECTORY_COLOUR)
+    assert ((t > 0.5) & (off < 3)).sum() > 50
+
+
+def test_png_edges_are_anti_aliased():
+    diagonal = [[float(i), 0.1 * i, 0.07 * i, 0.0] for i in range(2)]  # one straight piece
+    drawing = plot.render_map(make_reply([], diagonal), size=400)
+    image = plot.rasterise(drawing)
+    t, off = mix(image, plot.TRAJECTORY_COLOUR)
+    line = off < 3  # background, trajectory, or a mix of the two: all but the start dot...
+    edge = line & (t > 0.1) & (t < 0.9)
+    assert edge.sum() > 30, "partly covered pixels along the line"
+    # across the line, the coverage adds up to its width (a pixel and a half here)
+    col = int(drawing.to_px([0.05, 0.035])[0])
+    assert t[:, col][line[:, col]].sum() == pytest.approx(1.5 * np.hypot(1, 0.7), abs=0.4)
+
+
+@pytest.mark.parametrize("freetype", [True, False])
+def test_labels_are_drawn_at_their_points_at_their_height(monkeypatch, freetype):
+    if freetype and not PIL.features.check("freetype2"):
+        pytest.skip("this Pillow has no FreeType")
+    monkeypatch.setattr(plot, "_font", functools.cache(plot._font.__wrapped__))  # fonts afresh
+    if not freetype:  # as Pillow without FreeType: its one bitmap font
+        monkeypatch.setattr(plot.features, "check", lambda name: False)
+        monkeypatch.setattr(
+            ImageFont, "load_default", lambda size=None: ImageFont.load_default_imagefont()
+        )
+    drawing = plot.render_map(make_reply(ROOM, TRAJECTORY), size=1000)
+    labels = [item for item in drawing.items if isinstance(item, plot.Label)]
+    assert [label.text for label in labels] == ["0", "1", "2", "3", "1 m"]
+    with_labels = plot.rasterise(drawing).astype(int)
+    drawing.items[:] = [item for item in drawing.items if not isinstance(item, plot.Label)]
+    without = plot.rasterise(drawing).astype(int)
+    changed = (with_labels != without).any(axis=2)
+    ink = with_labels.sum(axis=2) < without.sum(axis=2) - 100  # the text is dark
+    boxes = np.zeros_like(changed)
+    for label in labels:
+        (x, y), h = label.centre, label.height
+        half_w, half_h = 0.6 * h * len(label.text) + 4, h + 4
+        top, left = int(y - half_h), int(x - half_w)
+        box = np.s_[top : int(y + half_h) + 1, left : int(x + half_w) + 1]
+        boxes[box] = True
+        rows, cols = np.nonzero(ink[box])
+        assert len(rows) > 10, label.text
+        assert top + (rows.min() + rows.max() + 1) / 2 == pytest.approx(y, abs=1.5), label.text
+        assert left + (cols.min() + cols.max() + 1) / 2 == pytest.approx(x, abs=1.5), label.text
+        assert 0.8 * h <= rows.max() - rows.min() + 1 <= 1.3 * h, label.text
+    assert not (changed & ~boxes).any(), "text drawn only at the labels"
 
 
 def band_pixels(image, drawing, x, y):
@@ -110,36 +156,6 @@ def band_pixels(image, drawing, x, y):
     reach = int(drawing.scale)
     column = image[row - reach : row + reach, col]
     return int((column != rgb(plot.BACKGROUND)).any(axis=1).sum())
-
-
-def inside_even_odd(polygon, x, y):
-    """Brute force: pixel centres (x, y) inside a polygon by the even-odd rule."""
-    inside = np.zeros(x.shape, dtype=bool)
-    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
-        if y0 == y1:
-            continue
-        crosses = (np.minimum(y0, y1) <= y) & (y < np.maximum(y0, y1))
-        inside ^= crosses & (x < x0 + (y - y0) * (x1 - x0) / (y1 - y0))
-    return inside
-
-
-@pytest.mark.parametrize("rows_per_pass", [1, 7, 1 << 17])
-def test_scanline_fill_matches_brute_force(rows_per_pass):
-    rng = np.random.default_rng(3)
-    height, width = 40, 50
-    # star-shaped (so simple, often not convex) polygons, some reaching off the picture
-    polygons = []
-    for _ in range(12):
-        angles = np.sort(rng.uniform(0, 2 * np.pi, 10))
-        radii = rng.uniform(2, 15, 10)
-        centre = rng.uniform(-5, 55, 2)
-        polygons.append(centre + radii[:, None] * np.column_stack([np.cos(angles), np.sin(angles)]))
-    diff = np.zeros((height, width + 1), dtype=np.int64)
-    plot._scan(np.stack(polygons), diff, rows_per_pass)
-    count = np.cumsum(diff[:, :width], axis=1)
-    y, x = np.mgrid[0:height, 0:width] + 0.5
-    expected = sum(inside_even_odd(p, x, y).astype(int) for p in polygons)
-    np.testing.assert_array_equal(count, expected)
 
 
 def test_band_is_wider_for_a_larger_covariance():
