@@ -21,8 +21,9 @@ import numpy as np
 from mapper_scaling import build
 
 from wallmap.common.codec import decode, encode
-from wallmap.common.map_query import QueryError, fetch_map
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.map_requests import QueryError, fetch_map
+from wallmap.common.transport import Keys, open_session
 from wallmap.launcher import free_loopback_port
 from wallmap.services.mapper import serving, state_file
 

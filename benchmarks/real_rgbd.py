@@ -30,7 +30,7 @@ from wallmap.offline import map_bag, points_at_heights, walls
 from wallmap.plot import write_picture
 from wallmap.recordings import RGBD, tum_as_bag
 from wallmap.services.mapper import serving
-from wallmap.services.player.service import PlayerSettings
+from wallmap.services.player.settings import PlayerSettings
 from wallmap.services.player.sources import SourceOptions
 
 

@@ -30,23 +30,19 @@ docs/deployment.md says what survives what, and for how long.
 from __future__ import annotations
 
 import collections
-import math
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import zenoh
 from zenoh import ext
 
 from wallmap.common.codec import MessageError
-from wallmap.common.config_file import require
+from wallmap.common.link_settings import History
 from wallmap.common.messages import (
     Frame,
-    Observations,
-    Progress,
-    pack,
     unpack_frame,
     unpack_progress,
 )
@@ -57,30 +53,6 @@ from wallmap.common.runtime import Stats, drain
 HEARTBEAT = 0.5  # s between a publisher's heartbeats: how soon a lost last sample is noticed
 CHANNEL_SLACK = 64  # samples a subscriber's channel holds beyond twice the window
 ASK_TIMEOUT = 10.0  # s the caches have to answer a service's own history query
-MAX_RATE = 60.0  # samples/s a publisher that does not know its rate sizes its cache for
-
-
-@dataclass(frozen=True)
-class History:
-    """How much of a stream is kept for subscribers that missed it.
-
-    Attributes:
-        seconds: The window: samples are kept this long (at the rate they are published).
-        max_bytes: The most a publisher's cache may hold.
-    """
-
-    seconds: float = 30.0
-    max_bytes: int = 512 * 1024 * 1024
-
-    def __post_init__(self) -> None:
-        require(0 < self.seconds < math.inf, "seconds", "a positive number", self.seconds)
-        require(self.max_bytes > 0, "max_bytes", "positive", self.max_bytes)
-
-    def samples(self, rate_hz: float = MAX_RATE, sample_bytes: int = 1) -> int:
-        """Samples a cache keeps: the window at ``rate_hz``, within ``max_bytes``."""
-        by_time = math.ceil(self.seconds * rate_hz)
-        by_size = self.max_bytes // max(sample_bytes, 1)
-        return max(1, min(by_time, by_size))
 
 
 def declare_history_publisher(
@@ -307,148 +279,9 @@ def frames_in_turn(
             yield waiting.popleft()
 
 
-# --- 4: the mapper takes each run's frames once and in order -------------------------------
+# --- 5: back-pressure (the mapper's side, 4 and 5, is ``common.frame_order``) ------------------
 
-MAX_RUNS = 16  # runs remembered
-MAX_HELD = 4096  # observations held for a gap, over all runs: then the oldest gap gives way
-
-
-@dataclass
-class _Run:
-    next: int | None  # the next frame to take; None until the run's start is decided
-    held: dict[int, Observations] = field(default_factory=dict)
-    since: float = 0.0  # when the head of the line started waiting
-
-
-@dataclass(frozen=True)
-class Taken:
-    """What a call to :meth:`InOrder.take` produced."""
-
-    ready: list[Observations]  # in frame order, to process now
-    lost: int  # frames given up on (gaps that did not fill in time)
-    repeated: list[Observations]  # frames already taken, come again (their ack was lost)
-
-
-class InOrder:
-    """Hold observations until their turn comes; give up gaps after ``gap_wait`` seconds."""
-
-    def __init__(
-        self, runs: Iterable[Progress] = (), *, gap_wait: float = 10.0, start_wait: float = 1.0
-    ) -> None:
-        self.gap_wait, self.start_wait = gap_wait, start_wait
-        self._runs: collections.OrderedDict[str, _Run] = collections.OrderedDict(
-            (r.run, _Run(r.processed)) for r in runs
-        )
-
-    def take(self, observations: Observations | None, now: float) -> Taken:
-        """Add an observation (or None, to let time pass); what is ready, lost or repeated."""
-        repeated = []
-        if observations is not None:
-            run = self._runs.get(observations.run)
-            if run is None:
-                run = self._runs[observations.run] = _Run(None, since=now)
-                while len(self._runs) > MAX_RUNS:
-                    self._runs.popitem(last=False)
-            self._runs.move_to_end(observations.run)
-            if run.next is not None and observations.seq < run.next:
-                repeated.append(observations)
-            else:
-                if not run.held:
-                    run.since = now
-                run.held.setdefault(observations.seq, observations)
-        ready, lost = [], 0
-        for run in self._runs.values():
-            lost += self._release(run, now, ready)
-        while sum(len(r.held) for r in self._runs.values()) > MAX_HELD:
-            oldest = min((r for r in self._runs.values() if r.held), key=lambda r: r.since)
-            lost += self._skip(oldest, now, ready)
-        return Taken(ready, lost, repeated)
-
-    def _release(self, run: _Run, now: float, ready: list[Observations]) -> int:
-        """Move the run's frames that are next into ``ready``; give up a gap held too long."""
-        if run.next is None:
-            # A run's first frame is number 0: with it there is nothing earlier to wait for.
-            # A run first seen mid-way waits ``start_wait`` for its history to come.
-            if 0 not in run.held and (not run.held or now - run.since < self.start_wait):
-                return 0
-            run.next = min(run.held)
-        lost = 0
-        while run.held:
-            if run.next in run.held:
-                ready.append(run.held.pop(run.next))
-                run.next += 1
-                run.since = now
-            elif now - run.since >= self.gap_wait:
-                lost += self._skip(run, now, ready)
-            else:
-                break
-        return lost
-
-    def _skip(self, run: _Run, now: float, ready: list[Observations]) -> int:
-        """Give up the run's current gap: jump to its earliest held frame."""
-        start = min(run.held)
-        lost = start - (run.next if run.next is not None else start)
-        run.next = start
-        run.since = now
-        while run.next in run.held:
-            ready.append(run.held.pop(run.next))
-            run.next += 1
-        return lost
-
-    def waiting(self) -> bool:
-        """Whether anything is held (the caller should come back soon, even if nothing comes)."""
-        return any(run.held for run in self._runs.values())
-
-
-# --- 5: acknowledgements and back-pressure ------------------------------------------------------
-
-ACK_EVERY = 8  # frames between acknowledgements while the mapper is busy
 STALL_POLL = 0.05  # s between looks at the stop event while a player waits for acknowledgements
-
-
-class RunProgress:
-    """How far the mapper has taken each player run: what it acknowledges, and keeps.
-
-    ``processed`` is the next frame number a run may send (frames are taken in order, so every
-    frame before it is done), with how many were integrated and dropped; the latest ``MAX_RUNS``
-    runs are kept, and saved with the map. The mapper's ``epoch`` (one per process) goes with
-    every acknowledgement, so a player sees a restarted mapper as such. ``count``, ``again`` and
-    ``flush`` run on the mapper's observation thread; ``runs`` is read under the caller's lock.
-    """
-
-    def __init__(self, runs: Iterable[Progress] = (), epoch: str = "") -> None:
-        self.epoch = epoch
-        self.runs: collections.OrderedDict[str, Progress] = collections.OrderedDict(
-            (r.run, replace(r, epoch=epoch)) for r in runs
-        )
-        self._unsent: dict[str, Progress] = dict(self.runs)  # runs restored: said first thing
-
-    def count(self, run: str, seq: int, *, integrated: bool) -> Progress:
-        """Frame ``seq`` of ``run`` is done (integrated, or dropped); its acknowledgement waits."""
-        old = self.runs.pop(run, Progress(run, 0, 0, 0))
-        new = Progress(
-            run,
-            seq + 1,
-            old.integrated + int(integrated),
-            old.dropped + int(not integrated),
-            self.epoch,
-        )
-        self.runs[run] = new
-        while len(self.runs) > MAX_RUNS:
-            self.runs.popitem(last=False)
-        self._unsent[run] = new
-        return new
-
-    def again(self, run: str) -> None:
-        """A frame already taken came again: its acknowledgement was lost, so say it again."""
-        if (progress := self.runs.get(run)) is not None:
-            self._unsent[run] = progress
-
-    def flush(self, put: Callable[[bytes], Any]) -> None:
-        """Publish the acknowledgements waiting, one per run."""
-        for progress in self._unsent.values():
-            put(pack(progress))
-        self._unsent.clear()
 
 
 class StalledError(RuntimeError):

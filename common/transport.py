@@ -17,64 +17,20 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import zenoh
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
-DEFAULT_PREFIX = "wallmap"
+from wallmap.common.link_settings import DEFAULT_PREFIX, TransportError, ZenohSettings
+
 # How often a client tries its router again once the link is lost. Zenoh's default starts at
 # 1 s and doubles to 4 s, which adds up to 4 s of loss after the router is back; a connect
 # attempt to a loopback or LAN router costs next to nothing.
 RECONNECT = "{period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2}"
 
 
-class TransportError(RuntimeError):
-    """The session could not be opened; the message says why, in one line."""
-
-
 class StoppedWaiting(Exception):  # noqa: N818 - a stop asked for, not an error
     """A stop (SIGINT, SIGTERM) came while the session was still waiting for its router."""
-
-
-@dataclass(frozen=True)
-class ZenohSettings:
-    """Where and how to connect: the ``zenoh`` section of the configuration.
-
-    Attributes:
-        connect: Endpoints of routers (or peers) to connect to.
-        prefix: First key segment(s) of every key, so several robots can share a network.
-        config_file: A Zenoh json5 config applied before these settings (TLS, access control).
-        wait_for_router: Seconds to keep trying to reach the router at start: ``inf`` for
-            services (they may start before their router), a few seconds for commands a person
-            runs, 0 to fail at once. Each command decides it; it is not configuration.
-    """
-
-    connect: tuple[str, ...] = (DEFAULT_CONNECT,)
-    prefix: str = DEFAULT_PREFIX
-    config_file: Path | None = None
-    wait_for_router: float = field(default=0.0, metadata={"config": False})
-
-    def __post_init__(self) -> None:
-        prefix = plain_prefix(self.prefix, "prefix", "--prefix, zenoh.prefix")
-        if not self.connect:
-            msg = "no endpoint to connect to"
-            raise TransportError(msg)
-        object.__setattr__(self, "prefix", prefix)
-
-
-def plain_prefix(value: str, what: str, where: str) -> str:
-    """A key prefix without its outer slashes.
-
-    TransportError for one that is empty or holds a wildcard: a prefix names one robot's keys,
-    not a pattern.
-    """
-    prefix = value.strip("/")
-    if not prefix or any(c in prefix for c in "*$?#"):
-        msg = f"invalid {what} {value!r} ({where}): use a plain key expression such as robot1/run2"
-        raise TransportError(msg)
-    return prefix
 
 
 def zenoh_reason(err: Exception) -> str:

@@ -29,15 +29,15 @@ from wallmap.arg_types import (
     robot_prefixes,
 )
 from wallmap.common.delivery import StalledError
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
+from wallmap.common.link_settings import DEFAULT_CONNECT, TransportError
+from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply
+from wallmap.common.map_requests import QueryError, fetch_map, fetch_rooms
 from wallmap.common.runtime import setup_logging, stop_on_signals
 from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
-    DEFAULT_CONNECT,
     Keys,
     StoppedWaiting,
-    TransportError,
     key_expression,
     open_session,
     zenoh_reason,

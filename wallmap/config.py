@@ -29,12 +29,11 @@ from typing import Any
 from wallmap.arg_types import picture_problem
 from wallmap.common import config_file
 from wallmap.common.config_file import Tree, require
-from wallmap.common.delivery import History
-from wallmap.common.transport import ZenohSettings
+from wallmap.common.link_settings import History, ZenohSettings
 from wallmap.services.detector.detector import DetectorConfig
-from wallmap.services.mapper.service import MapperSettings
+from wallmap.services.mapper.settings import MapperSettings
 from wallmap.services.odometry.tracker import OdometryConfig
-from wallmap.services.player.service import PlayerSettings
+from wallmap.services.player.settings import PlayerSettings
 from wallmap.services.ros2_source.settings import Ros2Settings
 
 HEADER = """\

@@ -26,8 +26,9 @@ import zenoh
 from wallmap import __version__
 from wallmap.arg_types import port, positive
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
+from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapUpdate
+from wallmap.common.map_requests import QueryError, fetch_map, fetch_rooms
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import Keys, open_session

@@ -23,18 +23,14 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from wallmap.common.map_query import MapQuery, QueryError, fetch_map, fetch_rooms
+from wallmap.common.link_settings import TransportError, ZenohSettings
+from wallmap.common.map_query import MapQuery
+from wallmap.common.map_requests import QueryError, fetch_map, fetch_rooms
 from wallmap.common.runtime import stop_on_signals
-from wallmap.common.transport import (
-    Keys,
-    TransportError,
-    ZenohSettings,
-    make_config,
-    open_session,
-)
+from wallmap.common.transport import Keys, make_config, open_session
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
 from wallmap.map_client import format_table, to_json
-from wallmap.services.player.service import PlayerSettings
+from wallmap.services.player.settings import PlayerSettings
 
 if TYPE_CHECKING:
     from wallmap.scene import FloorPlan, Trajectory

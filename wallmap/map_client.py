@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.codec import SCHEMA_VERSION, MessageError
-from wallmap.common.map_query import ask_mapper
 from wallmap.common.map_records import MapReply
+from wallmap.common.map_requests import ask_mapper
 from wallmap.common.transport import Keys
 
 if TYPE_CHECKING:

@@ -20,15 +20,15 @@ from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
 from wallmap.common.compiled import compile_all
 from wallmap.common.delivery import (
-    History,
     declare_history_publisher,
     frames_in_turn,
     subscribe_with_history,
 )
+from wallmap.common.link_settings import History, ZenohSettings
 from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
 

@@ -19,9 +19,9 @@ from wallmap.common.codec import encode
 from wallmap.common.runtime import Stats, drain
 from wallmap.common.transport import Keys
 from wallmap.services.mapper import serving
+from wallmap.services.mapper.mapping import Mapping
 from wallmap.services.mapper.room_map import RoomsReply
 from wallmap.services.mapper.ros2_out import RoomMarkers
-from wallmap.services.pipeline import Mapping
 
 ROOMS_PERIOD = 1.0  # s between two segmentations of a changing map, at least
 BUSY_SHARE = 10.0  # ...and this many times the last one's duration

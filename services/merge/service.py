@@ -23,24 +23,18 @@ from typing import Any
 import zenoh
 
 from wallmap.common.codec import SCHEMA_VERSION, encode
-from wallmap.common.map_query import (
+from wallmap.common.link_settings import TransportError, ZenohSettings, plain_prefix
+from wallmap.common.map_query import MapQuery
+from wallmap.common.map_records import MapReply
+from wallmap.common.map_requests import (
     MalformedReplyError,
-    MapQuery,
     QueryError,
     answer_map_queries,
     fetch_map,
     fetch_rooms,
 )
-from wallmap.common.map_records import MapReply
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
-from wallmap.common.transport import (
-    Keys,
-    TransportError,
-    ZenohSettings,
-    key_expression,
-    open_session,
-    plain_prefix,
-)
+from wallmap.common.transport import Keys, key_expression, open_session
 from wallmap.services.mapper.ros2_out import RoomMarkers, Ros2Outlet
 from wallmap.services.merge.fleet import Fleet
 

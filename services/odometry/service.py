@@ -18,12 +18,13 @@ import zenoh
 from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.codec import MessageError
-from wallmap.common.delivery import History, declare_history_publisher, received_frames
-from wallmap.common.map_query import MalformedReplyError, QueryError, fetch_map
+from wallmap.common.delivery import declare_history_publisher, received_frames
+from wallmap.common.link_settings import History, ZenohSettings
+from wallmap.common.map_requests import MalformedReplyError, QueryError, fetch_map
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, setup_logging
 from wallmap.common.scan_row import RowSelection, select_scan
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
 LOG = logging.getLogger("wallmap.odometry")

@@ -13,12 +13,11 @@ out to nobody.
 from __future__ import annotations
 
 import logging
-import math
 import sys
 import threading
 import time
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,73 +26,24 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
-from wallmap.common.config_file import require
-from wallmap.common.delivery import MAX_RATE, AckWindow, History, declare_history_publisher
+from wallmap.common.delivery import AckWindow, declare_history_publisher
+from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
 from wallmap.common.messages import Frame, pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.transport import Keys, ZenohSettings, make_config, open_session
+from wallmap.common.transport import Keys, make_config, open_session
 from wallmap.services.detector_rows import ask_rows
 from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.frames import SensorFrame
 from wallmap.services.player.playback import Playback
 from wallmap.services.player.pose_stream import POSE_PERIOD, stream_of
-from wallmap.services.player.sources import FrameSource, SourceOptions, open_source
+from wallmap.services.player.settings import PlayerSettings
+from wallmap.services.player.sources import FrameSource, open_source
 from wallmap.services.player.terminal_keys import HELP, terminal_keys
 
 JOIN_TIMEOUT = 2.0  # s the control thread gets to see its queryable undeclared
 PROGRESS_PERIOD = 0.2  # s between progress messages
-
-
-@dataclass(frozen=True)
-class PlayerSettings:
-    """How to play a recording (which one is the command's argument, not configuration).
-
-    Attributes:
-        rate: speed factor on the recorded timing (ignored with ``fast``).
-        fast: as fast as the pipeline takes it, with no frame lost.
-        source: how to read it: pose source, sensor topic, levelling, a TUM folder's camera.
-        window: frames in flight with ``fast``.
-        wait_for: services whose liveliness to wait for before playing (not set: the detector
-            and the mapper with ``fast``, none in real time).
-        wait_timeout: how long to wait for them (s).
-        stall_timeout: with ``fast``, how long without an acknowledgement is a failure (s).
-        whole_clouds: send whole clouds instead of only the row the detector asks for.
-        start: begin this many seconds into the bag.
-        duration: play this many seconds of the bag (None: to the end).
-        loop: start over at the end, until stopped.
-        paused: start paused (step or resume through the controls).
-    """
-
-    rate: float = 1.0
-    fast: bool = False
-    source: SourceOptions = field(default_factory=SourceOptions)
-    window: int = 16
-    wait_for: tuple[str, ...] | None = None
-    wait_timeout: float = 30.0
-    stall_timeout: float = 30.0
-    whole_clouds: bool = False
-    start: float = 0.0
-    duration: float | None = None
-    loop: bool = False
-    paused: bool = False
-
-    def __post_init__(self) -> None:
-        require(0 < self.rate < math.inf, "rate", "a positive number", self.rate)
-        require(self.window >= 1, "window", "at least 1", self.window)
-        require(self.wait_timeout >= 0, "wait_timeout", ">= 0", self.wait_timeout)
-        require(self.stall_timeout > 0, "stall_timeout", "positive", self.stall_timeout)
-        require(self.start >= 0, "start", ">= 0", self.start)
-        duration = self.duration
-        require(duration is None or duration > 0, "duration", "positive", duration)
-
-    @property
-    def services(self) -> tuple[str, ...]:
-        """The services to wait for, ``wait_for`` or its default."""
-        if self.wait_for is not None:
-            return self.wait_for
-        return ("detector", "mapper") if self.fast else ()
 
 
 @dataclass(frozen=True)

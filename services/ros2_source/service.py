@@ -24,12 +24,13 @@ import zenoh
 from zenoh import ext
 
 from wallmap.common.codec import MessageError
-from wallmap.common.delivery import MAX_RATE, History, declare_history_publisher
+from wallmap.common.delivery import declare_history_publisher
+from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
 from wallmap.common.messages import Frame, Pose, pack
 from wallmap.common.ros2_types import deserialize_cdr
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
 from wallmap.common.runtime import Presence, Stats, setup_logging
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.services.detector_rows import ask_rows
 from wallmap.services.mapper.pose_input import TF_TYPE
 from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN

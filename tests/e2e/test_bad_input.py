@@ -15,7 +15,8 @@ from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
 from wallmap.common.codec import encode
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import Keys, open_session
 from wallmap.scene import write_scene_bag
 
 pytestmark = pytest.mark.e2e

@@ -10,8 +10,9 @@ import zenoh
 from rows import wall_stub_strays
 
 from wallmap.common.codec import decode
+from wallmap.common.link_settings import ZenohSettings
 from wallmap.common.messages import Frame, pack
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 
 
 @pytest.mark.e2e

@@ -20,7 +20,8 @@ import pytest
 from conftest import free_port
 from test_recovery import N_FRAMES, _control, _until
 
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import Keys, open_session
 from wallmap.scene import write_scene_bag
 
 pytestmark = pytest.mark.e2e

@@ -19,7 +19,8 @@ from conftest import ROOT
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from wallmap.common.transport import ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import open_session
 from wallmap.evaluation import MapScore, evaluate_map
 from wallmap.scene import write_scene_bag, write_tum
 

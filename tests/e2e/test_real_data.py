@@ -14,6 +14,7 @@ import pytest
 import zenoh
 from conftest import REAL_DATA
 
+from wallmap.common.link_settings import ZenohSettings
 from wallmap.common.map_consistency import (
     MappedWall,
     angle_between,
@@ -22,7 +23,7 @@ from wallmap.common.map_consistency import (
 )
 from wallmap.common.messages import unpack_pose
 from wallmap.common.se2 import transform_points
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.offline import scan_rows
 
 pytestmark = pytest.mark.e2e

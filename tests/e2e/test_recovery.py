@@ -14,8 +14,9 @@ import pytest
 import zenoh
 
 from wallmap.common.codec import decode
+from wallmap.common.link_settings import ZenohSettings
 from wallmap.common.messages import Frame, pack
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.offline import map_bag, walls
 from wallmap.scene import write_scene_bag
 

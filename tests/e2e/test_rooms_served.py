@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from conftest import free_port, run_wallmap
 
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import Keys, open_session
 from wallmap.room_evaluation import iou
 from wallmap.scene import load_truth, write_scene_bag
 from wallmap.scene.floorplan import glass_wall_plan

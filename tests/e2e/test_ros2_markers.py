@@ -7,8 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from wallmap.common.map_query import MapQuery, fetch_map
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.map_query import MapQuery
+from wallmap.common.map_requests import fetch_map
+from wallmap.common.transport import Keys, open_session
 from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import ros2_out
 

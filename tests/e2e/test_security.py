@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from conftest import free_port, run_wallmap, wait_for_port
 
-from wallmap.common.transport import DEFAULT_CONNECT
+from wallmap.common.link_settings import DEFAULT_CONNECT
 from wallmap.launcher import sample_bag
 
 pytestmark = pytest.mark.e2e

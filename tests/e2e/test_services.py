@@ -10,11 +10,8 @@ import pytest
 import zenoh
 
 from wallmap.common.codec import decode
-from wallmap.common.transport import (
-    Keys,
-    ZenohSettings,
-    open_session,
-)
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import Keys, open_session
 from wallmap.scene import write_scene_bag
 
 

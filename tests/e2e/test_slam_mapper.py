@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import zenoh
 
+from wallmap.common.link_settings import ZenohSettings
 from wallmap.common.messages import unpack_pose
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.evaluation import evaluate_map
 
 N_FRAMES = 600

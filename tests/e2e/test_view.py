@@ -30,10 +30,12 @@ import pytest
 from conftest import ROOT, Service, Stack, free_port, wait_for_port
 
 from wallmap.common.codec import MessageError
-from wallmap.common.map_query import MapQuery, fetch_map
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply, MapUpdate
+from wallmap.common.map_requests import fetch_map
 from wallmap.common.messages import Observations, Pose, WallObservation
-from wallmap.common.transport import Keys, ZenohSettings, open_session
+from wallmap.common.transport import Keys, open_session
 from wallmap.scene import write_scene_bag
 from wallmap.services.mapper import state_file
 from wallmap.view.live import LiveMap

@@ -62,6 +62,36 @@ def test_services_import_no_command_or_tool() -> None:
     assert not offenders, sorted(offenders)
 
 
+# The Zenoh layer of common/: sessions and keys, delivery, the service runtime, map requests.
+ZENOH_LAYER = {"transport", "delivery", "runtime", "map_requests"}
+PURE = (
+    "wallmap.services.pipeline",  # the method, top to bottom
+    "wallmap.offline",  # the offline runner
+    "wallmap.config",  # the one configuration
+    "wallmap.services.mapper.intake",
+    "wallmap.services.mapper.restore",
+)
+
+
+def test_the_pure_core_loads_no_zenoh_and_no_terminal() -> None:
+    """The maths, the pipeline, the offline runner and the mapper's policy import without Zenoh
+    (or termios): where it is not installed, or not wanted, they still run."""
+    maths = [
+        f"wallmap.common.{path.stem}"
+        for path in sorted((ROOT / "common").glob("*.py"))
+        if path.stem not in ZENOH_LAYER | {"__init__"}
+    ]
+    code = (
+        "import importlib, sys\n"
+        f"for name in {[*maths, *PURE]!r}: importlib.import_module(name)\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'zenoh', 'termios'}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 def _import_statements(path: Path) -> set[str]:
     """Every absolute import statement of a file, one name each (``from a import b``)."""
     lines = set()
@@ -113,22 +143,10 @@ def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
     assert report["summary"]["errorCount"] == 1, report["generalDiagnostics"][:5]
 
 
-# Longer for now, each for a reason: the scene generator draws its random numbers in one fixed
-# order, and splitting these must keep every generated scene (and with them every accuracy
-# table) as it is: issue 30's scene-writer work, checked scene by scene.
-LONG_FOR_NOW = {
-    "wallmap/scene/bags.py write_scene_bag",
-    "wallmap/scene/floorplan.py _try_plan",
-    "wallmap/scene/floorplan.py _try_corridor",
-    "wallmap/scene/render.py render_depth",
-    "wallmap/scene/trajectory.py generate_trajectory",
-}
-
-
 def test_no_function_is_longer_than_60_lines() -> None:
     """Readable top to bottom: a function that does not fit on a screen does several jobs.
 
-    Over the pure code, the services and the command (``wallmap/``), but for ``LONG_FOR_NOW``.
+    Over the pure code, the services and the command (``wallmap/``).
     """
     found = {
         f"{path.relative_to(ROOT)} {node.name}": node.end_lineno - node.lineno + 1
@@ -138,14 +156,8 @@ def test_no_function_is_longer_than_60_lines() -> None:
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
     }
-    long = sorted(
-        f"{name} ({n})" for name, n in found.items() if n > 60 and name not in LONG_FOR_NOW
-    )
+    long = sorted(f"{name} ({n})" for name, n in found.items() if n > 60)
     assert not long, long
-    still = {name for name in LONG_FOR_NOW if found.get(name, 0) > 60}
-    assert still == LONG_FOR_NOW, (
-        f"no longer long: take them off LONG_FOR_NOW {LONG_FOR_NOW - still}"
-    )
 
 
 def test_a_checkout_without_its_links_says_so_at_import(tmp_path: Path) -> None:

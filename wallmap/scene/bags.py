@@ -9,15 +9,29 @@ scan. The ground truth file ``<bag>.truth.json`` holds the plan, the true trajec
 how often the detector could have seen each wall, all in the plan's (the world's) frame, and
 where the bag's map frame lies in it: the world frame itself, or, for a robot of a fleet
 whose map starts where it was switched on, its first pose (``own_frame``).
+
+The topics of :func:`write_scene_bag`: /tf_static (base_link → camera_link →
+camera_optical_frame for the camera, base_link → laser for the scanner), /tf (odom → base_link
+at the sensor stamps and midway between them, map → odom at 2/3 of the sensor rate), /odom
+(drifting odometry at sensor stamps), /ground_truth (true pose in map), /amcl_pose (the true
+pose again, with a 2 cm / 1 degree covariance, as from a localiser), and the sensor data:
+either /camera/depth/points (organized PointCloud2, fields x, y, z, rgb, point_step 32, NaN for
+no return), /camera/depth/image_raw (16UC1 millimetres with 0 for no return, or 32FC1 metres
+with NaN) with /camera/depth/camera_info, or /scan (LaserScan in frame laser, +inf for no
+return). Header stamps and bag times are the trajectory stamps. ``map → odom ∘ odom →
+base_link``, interpolated at a sensor stamp, is the true pose to well under 1 mm. With pose
+faults, /odom, /ground_truth and /amcl_pose carry them too, and ``map → odom ∘ odom →
+base_link`` is the faulty pose.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from rosbags.interfaces import (
@@ -349,6 +363,12 @@ def _amcl_pose(sink: BagSink, stamp_ns: int, pose: tuple[float, float, float]) -
     )
 
 
+def _ground_truth(sink: BagSink, stamp_ns: int, pose: tuple[float, float, float]) -> Any:
+    return sink.types["geometry_msgs/msg/PoseStamped"](
+        header=sink.header(GROUND_TRUTH_TOPIC, stamp_ns, MAP_FRAME), pose=_pose(sink, *pose)
+    )
+
+
 def _body_twist(odom: Trajectory) -> np.ndarray:
     """Velocities (N, 3): forward, left, yaw rate, in base_link, by central differences."""
     vx = np.gradient(odom.x, odom.stamps)
@@ -470,6 +490,326 @@ def _pose_sources(
     return posed.relative_to(map_in_world), odom.relative_to(map_in_world)
 
 
+@dataclass(frozen=True, eq=False)
+class _Drive:
+    """A scene's drive as its bag records it, sampled at twice the sensor rate.
+
+    Even samples are sensor frames, odd ones the extra odom → base_link transforms between them.
+
+    Attributes:
+        fine: The true poses, in the plan's frame.
+        posed: What the bag's pose sources say: the truth, or the truth as a faulty source has
+            it; in the bag's map frame.
+        odom: The drifting odometry, in the bag's map frame.
+        twist: The odometry's body velocities (N, 3), for /odom.
+        stamps_ns: Every sample's stamp.
+        map_in_world: Where the bag's map frame lies in the plan's frame.
+        faulty: Whether ``posed`` has faults.
+    """
+
+    fine: Trajectory
+    posed: Trajectory
+    odom: Trajectory
+    twist: np.ndarray
+    stamps_ns: list[int]
+    map_in_world: tuple[float, float, float]
+    faulty: bool
+
+    @property
+    def map_odom_every(self) -> int:
+        """Samples from one map → odom transform to the next.
+
+        Every sample with faults, so that map → base_link is the faulty pose at each stamp, not
+        an interpolation across a glitch.
+        """
+        return 1 if self.faulty else _MAP_ODOM_EVERY
+
+
+def _true_drive(
+    plan: FloorPlan, seed: int, *, n_frames: int, rate_hz: float, reverse: bool
+) -> Trajectory:
+    """The true drive at twice the sensor rate, cut to ``n_frames`` sensor frames at most.
+
+    Raises:
+        ValueError: If ``n_frames`` is not positive.
+    """
+    if n_frames < 1:
+        raise ValueError("n_frames must be positive")
+    fine = generate_trajectory(plan, seed, rate_hz=2 * rate_hz, reverse=reverse)
+    n_frames = min(n_frames, (len(fine) + 1) // 2)
+    return fine.sliced(slice(0, 2 * n_frames - 1))
+
+
+def _as_recorded(
+    fine: Trajectory,
+    seed: int,
+    *,
+    drift: tuple[float, float],
+    faults: PoseFaults | None,
+    own_frame: bool,
+) -> _Drive:
+    """The true drive ``fine`` with what the bag's pose sources say of it (``_pose_sources``)."""
+    map_in_world = fine.pose_at(0) if own_frame else (0.0, 0.0, 0.0)
+    posed, odom = _pose_sources(fine, seed, drift, faults, map_in_world)
+    return _Drive(
+        fine=fine,
+        posed=posed,
+        odom=odom,
+        twist=_body_twist(odom),
+        stamps_ns=[stamp_to_ns(s) for s in fine.stamps],
+        map_in_world=map_in_world,
+        faulty=faults is not None and faults.any,
+    )
+
+
+_Pose = tuple[float, float, float]  # x, y, yaw
+_TopicList = tuple[tuple[str, str], ...]  # (name, message type), in opening order
+_Outputs = tuple[Connection, ...]  # a sensor's connections, in its topics' order
+
+
+@dataclass(frozen=True, eq=False)
+class _Sensor(ABC):
+    """A bag's sensor: what it sees of the plan, its topics and how it writes a frame.
+
+    One subclass a kind of sensor, chosen once (:func:`_sensor_for`); the poses, tf and truth
+    around its frames are the same for every kind.
+
+    Attributes:
+        kind: The sensor kind, as the truth file names it.
+        plan: The scene it sees.
+        rate_hz: Its frame rate.
+        rng: Its noise.
+    """
+
+    kind: SensorKind
+    plan: FloorPlan
+    rate_hz: float
+    rng: np.random.Generator
+    topics: ClassVar[_TopicList]
+
+    @abstractmethod
+    def truth_mount(self) -> dict[str, Any]:
+        """The sensor and its mount, for the truth file."""
+
+    @abstractmethod
+    def static_tf(self, sink: BagSink, stamp_ns: int) -> Any:
+        """The /tf_static message: where the sensor sits on base_link."""
+
+    @abstractmethod
+    def write_frame(self, sink: BagSink, out: _Outputs, stamp_ns: int, pose: _Pose) -> set[int]:
+        """Render, and write to ``out`` (its ``topics``), what it sees from ``pose``.
+
+        Returns:
+            The walls the detector could see in the frame.
+        """
+
+
+@dataclass(frozen=True, eq=False)
+class _ScanSensor(_Sensor):
+    """A 2-D laser scanner: /scan."""
+
+    scanner: Scanner
+    topics: ClassVar[_TopicList] = ((SCAN_TOPIC, "sensor_msgs/msg/LaserScan"),)
+
+    def truth_mount(self) -> dict[str, Any]:
+        """The scanner, for the truth file."""
+        return {"scanner": self.scanner.to_json()}
+
+    def static_tf(self, sink: BagSink, stamp_ns: int) -> Any:
+        """base_link → laser."""
+        return _laser_static_tf(sink, stamp_ns, self.scanner)
+
+    def write_frame(self, sink: BagSink, out: _Outputs, stamp_ns: int, pose: _Pose) -> set[int]:
+        """One LaserScan."""
+        ranges, hit_wall = render_scan(self.plan, *pose, self.scanner, self.rng)
+        scan = _laser_scan(sink, stamp_ns, ranges, self.scanner, self.rate_hz)
+        sink.write(out[0], stamp_ns, scan)
+        return scan_walls_seen(hit_wall, ranges)
+
+
+@dataclass(frozen=True, eq=False)
+class _CameraSensor(_Sensor, ABC):
+    """A depth camera: its mount and its rendering, whichever way it publishes a depth image."""
+
+    camera: Camera
+
+    def truth_mount(self) -> dict[str, Any]:
+        """The camera, for the truth file."""
+        return {"camera": self.camera.to_json()}
+
+    def static_tf(self, sink: BagSink, stamp_ns: int) -> Any:
+        """base_link → camera_link → camera_optical_frame."""
+        return _camera_static_tf(sink, stamp_ns, self.camera)
+
+    def write_frame(self, sink: BagSink, out: _Outputs, stamp_ns: int, pose: _Pose) -> set[int]:
+        """One depth image, published the subclass's way."""
+        depth, hit_wall = render_depth(self.plan, *pose, self.camera, self.rng)
+        self.publish(sink, out, stamp_ns, depth)
+        return walls_seen(hit_wall, depth, self.camera)
+
+    @abstractmethod
+    def publish(self, sink: BagSink, out: _Outputs, stamp_ns: int, depth: np.ndarray) -> None:
+        """Write one depth image (metres, NaN for no return) to the camera's topics."""
+
+
+@dataclass(frozen=True, eq=False)
+class _CloudSensor(_CameraSensor):
+    """A depth camera publishing organized point clouds: /camera/depth/points."""
+
+    topics: ClassVar[_TopicList] = ((POINTS_TOPIC, "sensor_msgs/msg/PointCloud2"),)
+
+    def publish(self, sink: BagSink, out: _Outputs, stamp_ns: int, depth: np.ndarray) -> None:
+        """One PointCloud2."""
+        sink.write(out[0], stamp_ns, _point_cloud(sink, stamp_ns, depth, self.camera))
+
+
+@dataclass(frozen=True, eq=False)
+class _ImageSensor(_CameraSensor):
+    """A depth camera publishing images (``kind`` says 16UC1 or 32FC1) and their camera info."""
+
+    topics: ClassVar[_TopicList] = (
+        (IMAGE_TOPIC, "sensor_msgs/msg/Image"),
+        (CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo"),
+    )
+
+    def publish(self, sink: BagSink, out: _Outputs, stamp_ns: int, depth: np.ndarray) -> None:
+        """One Image and its CameraInfo."""
+        image_conn, info_conn = out
+        image = depth_image(sink, stamp_ns, depth, self.camera, self.kind)
+        sink.write(image_conn, stamp_ns, image)
+        sink.write(info_conn, stamp_ns, camera_info(sink, stamp_ns, self.camera))
+
+
+def _sensor_for(
+    kind: SensorKind,
+    *,
+    plan: FloorPlan,
+    rate_hz: float,
+    rng: np.random.Generator,
+    camera: Camera | None,
+    scanner: Scanner | None,
+) -> _Sensor:
+    """The sensor of ``kind``, with the default camera or scanner if none is given."""
+    if kind == "laserscan":
+        scanner = Scanner() if scanner is None else scanner
+        return _ScanSensor(kind=kind, plan=plan, rate_hz=rate_hz, rng=rng, scanner=scanner)
+    camera = Camera() if camera is None else camera
+    sensor = _CloudSensor if kind == "pointcloud" else _ImageSensor
+    return sensor(kind=kind, plan=plan, rate_hz=rate_hz, rng=rng, camera=camera)
+
+
+@dataclass(frozen=True)
+class _Topics:
+    """The connections of a scene bag; ``sensor`` are the sensor's own, in its order."""
+
+    tf_static: Connection
+    tf: Connection
+    odom: Connection
+    ground_truth: Connection
+    sensor: _Outputs
+    amcl: Connection
+
+
+def _open_topics(sink: BagSink, sensor_topics: _TopicList) -> _Topics:
+    """Every topic of a scene bag, opened in the order (the arguments') that gives each its id."""
+    return _Topics(
+        tf_static=sink.topic(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True),
+        tf=sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage"),
+        odom=sink.topic(ODOM_TOPIC, "nav_msgs/msg/Odometry"),
+        ground_truth=sink.topic(GROUND_TRUTH_TOPIC, "geometry_msgs/msg/PoseStamped"),
+        sensor=tuple(sink.topic(name, msgtype) for name, msgtype in sensor_topics),
+        # Opened last so that the other topics keep the connection ids they always had.
+        amcl=sink.topic(AMCL_POSE_TOPIC, "geometry_msgs/msg/PoseWithCovarianceStamped"),
+    )
+
+
+def _write_tf(sink: BagSink, tf: Connection, drive: _Drive, k: int) -> None:
+    """Sample ``k``'s odom → base_link, and the map → odom that makes the chain the bag's pose.
+
+    map → odom is written every ``map_odom_every`` samples and at the last one.
+    """
+    stamp_ns = drive.stamps_ns[k]
+    odom_pose = se2.matrix(drive.odom.pose_at(k))
+    if k % drive.map_odom_every == 0 or k == len(drive.stamps_ns) - 1:
+        map_odom = se2.matrix(drive.posed.pose_at(k)) @ np.linalg.inv(odom_pose)
+        msg = _planar_transform(sink, stamp_ns, MAP_FRAME, ODOM_FRAME, map_odom)
+        sink.write(tf, stamp_ns, tf_message(sink, msg))
+    msg = _planar_transform(sink, stamp_ns, ODOM_FRAME, BASE_FRAME, odom_pose)
+    sink.write(tf, stamp_ns, tf_message(sink, msg))
+
+
+def _write_poses(sink: BagSink, topics: _Topics, drive: _Drive, k: int) -> None:
+    """Sensor frame ``k``'s /odom, /ground_truth and /amcl_pose."""
+    stamp_ns = drive.stamps_ns[k]
+    odometry = _odometry(sink, stamp_ns, drive.odom.pose_at(k), drive.twist[k])
+    sink.write(topics.odom, stamp_ns, odometry)
+    given = drive.posed.pose_at(k)
+    sink.write(topics.ground_truth, stamp_ns, _ground_truth(sink, stamp_ns, given))
+    sink.write(topics.amcl, stamp_ns, _amcl_pose(sink, stamp_ns, given))
+
+
+def _write_frames(sink: BagSink, drive: _Drive, sensor: _Sensor) -> dict[int, int]:
+    """The whole drive: the mount, every sample's tf and every sensor frame's poses and data.
+
+    Returns:
+        Per wall id, the number of frames in which the detector could see it.
+    """
+    topics = _open_topics(sink, sensor.topics)
+    first_ns = drive.stamps_ns[0]
+    sink.write(topics.tf_static, first_ns, sensor.static_tf(sink, first_ns))
+    seen_counts = {w.id: 0 for w in sensor.plan.walls}
+    for k, stamp_ns in enumerate(drive.stamps_ns):
+        _write_tf(sink, topics.tf, drive, k)
+        if k % 2:
+            continue
+        _write_poses(sink, topics, drive, k)
+        for wall_id in sensor.write_frame(sink, topics.sensor, stamp_ns, drive.fine.pose_at(k)):
+            seen_counts[wall_id] += 1
+    return seen_counts
+
+
+def _write_truth(
+    path: Path,
+    *,
+    seed: int,
+    fmt: BagFormat,
+    sensor: _Sensor,
+    drive: _Drive,
+    seen_counts: dict[int, int],
+    reverse: bool,
+) -> SceneInfo:
+    """``<path>.truth.json`` beside the bag, and what was written."""
+    truth = drive.fine.sliced(slice(None, None, 2))
+    truth_path = truth_path_for(path)
+    truth_path.write_text(
+        json.dumps(
+            {
+                "seed": seed,
+                "format": fmt,
+                "sensor": sensor.kind,
+                "rate_hz": sensor.rate_hz,
+                "n_frames": len(truth),
+                **sensor.truth_mount(),
+                "plan": sensor.plan.to_json(),
+                "trajectory": truth.to_json(),
+                "stamps_ns": drive.stamps_ns[::2],
+                "seen_counts": {str(k): v for k, v in seen_counts.items()},
+                "reverse": reverse,
+                "map_in_world": list(drive.map_in_world),
+            }
+        )
+    )
+    return SceneInfo(
+        path=path,
+        truth_path=truth_path,
+        n_frames=len(truth),
+        plan=sensor.plan,
+        trajectory=truth,
+        seen_counts=seen_counts,
+        map_in_world=drive.map_in_world,
+    )
+
+
 def write_scene_bag(
     path: str | Path,
     *,
@@ -489,48 +829,26 @@ def write_scene_bag(
 ) -> SceneInfo:
     """Drive through a scene and record it as a bag, plus ``<path>.truth.json``.
 
-    Topics: /tf_static (base_link → camera_link → camera_optical_frame for the camera,
-    base_link → laser for the scanner), /tf (odom → base_link at the sensor stamps and
-    midway between them, map → odom at 2/3 of the sensor rate), /odom (drifting odometry at
-    sensor stamps), /ground_truth (true pose in map), /amcl_pose (the true pose again, with
-    a 2 cm / 1 degree covariance, as from a localiser), and the sensor data: either
-    /camera/depth/points (organized PointCloud2, fields x, y, z, rgb, point_step 32, NaN for
-    no return), /camera/depth/image_raw (16UC1 millimetres with 0 for no return, or 32FC1
-    metres with NaN) with /camera/depth/camera_info, or /scan (LaserScan in frame laser,
-    +inf for no return). Header stamps and bag times are the trajectory stamps.
-    ``map → odom ∘ odom → base_link``, interpolated at a sensor stamp, is the true pose to
-    well under 1 mm.
+    The bag's topics are in the module's docstring.
 
     Args:
         path: Bag to create: a file for ROS 1, a folder for ROS 2; must not exist.
-        seed: Seed of everything: the plan (``generate_floorplan(seed)`` unless ``plan``
-            is given), the trajectory, the odometry drift and the sensor noise.
+        seed: Seed of everything: the plan (unless ``plan`` is given), the trajectory, the
+            odometry drift and the sensor noise.
         n_frames: Sensor frames to write; fewer if the route ends first.
         fmt: Bag format.
         sensor: What the sensor publishes: a depth camera's cloud or image, or a scan.
-        camera: Depth camera and mount (not used for ``laserscan``); the default is a
-            160 x 120 Kinect-like camera.
-        scanner: Laser scanner and mount (used only for ``laserscan``); default
-            :class:`Scanner`.
-        plan: Scene to drive through (must have a route); generated if None.
+        camera: Depth camera and mount, but for ``laserscan``; 160 x 120 Kinect-like if None.
+        scanner: Laser scanner and mount, only for ``laserscan``; :class:`Scanner` if None.
+        plan: Scene to drive through (it must have a route); ``generate_floorplan(seed)`` if None.
         rate_hz: Sensor frame rate.
         compress: LZ4 chunk compression (ROS 1 only), for bags that ship in a repository.
-        odometry_drift: How /odom drifts: its position error per metre (0.02 = 2 %) and its
-            heading error in degrees per metre (``drifting_odometry``).
-        faults: How every pose source of the bag errs (``pose_faults``): tf ``map -> odom`` is
-            then written at every odom -> base_link stamp so that ``map -> base_link`` is the
-            faulty pose, /odom, /ground_truth and /amcl_pose carry the faults too, and the
-            faulty poses are also written as a TUM file, ``<path>.poses.tum``. The truth file
-            keeps the true trajectory.
-        reverse: Drive the plan's route the other way, from its last waypoint to its first
-            (``generate_trajectory``): another robot's drive through the same building.
-        own_frame: Give every pose of the bag (tf ``map -> odom`` and ``odom -> base_link``,
-            /odom, /ground_truth, /amcl_pose, the TUM file) in a map frame at the robot's true
-            first pose, as a robot of a fleet has its own map; the first ground-truth pose is
-            then (0, 0, 0). The sensor data are the same, and the truth file keeps the plan and
-            the trajectory in the plan's frame and says where the map frame lies in it
-            (``map_in_world``, read by :func:`load_map_in_world`): score a map of the bag
-            after moving it by that.
+        odometry_drift: /odom's error per metre: of position (0.02 = 2 %), of heading (degrees).
+        faults: How every pose source of the bag errs (``pose_faults``); the faulty poses also
+            go to ``<path>.poses.tum``, and the truth file keeps the true trajectory.
+        reverse: Drive the plan's route from its end to its start: another robot's drive.
+        own_frame: Every pose of the bag in a map frame at the robot's true first pose, as a
+            fleet robot's own map; the truth stays in the plan's frame, with ``map_in_world``.
 
     Returns:
         What was written, including the per-wall seen counts.
@@ -538,114 +856,20 @@ def write_scene_bag(
     Raises:
         ValueError: If ``n_frames`` is not positive.
     """
-    if n_frames < 1:
-        raise ValueError("n_frames must be positive")
     path = Path(path)
-    laser = sensor == "laserscan"
-    camera = Camera() if camera is None else camera
-    scanner = Scanner() if scanner is None else scanner
     plan = generate_floorplan(seed) if plan is None else plan
     traj_seed, odom_seed, noise_seed = sub_seeds(seed, 3)
-
-    # Sampled at twice the sensor rate: even samples are sensor frames, odd ones are the
-    # extra odom → base_link transforms between them.
-    fine = generate_trajectory(plan, traj_seed, rate_hz=2 * rate_hz, reverse=reverse)
-    n_frames = min(n_frames, (len(fine) + 1) // 2)
-    fine = fine.sliced(slice(0, 2 * n_frames - 1))  # true poses in the plan's frame
-    truth = fine.sliced(slice(None, None, 2))
-    map_in_world = fine.pose_at(0) if own_frame else (0.0, 0.0, 0.0)
-    # What the bag says: the truth, or the truth as a faulty source has it; in the bag's map.
-    posed, odom = _pose_sources(fine, odom_seed, odometry_drift, faults, map_in_world)
-    faulty = faults is not None and faults.any
-    if faulty:
-        write_tum(posed, tum_path_for(path))
-    every_map_odom = 1 if faulty else _MAP_ODOM_EVERY
-    twist = _body_twist(odom)
-    stamps_ns = [stamp_to_ns(s) for s in fine.stamps]
+    fine = _true_drive(plan, traj_seed, n_frames=n_frames, rate_hz=rate_hz, reverse=reverse)
+    drive = _as_recorded(fine, odom_seed, drift=odometry_drift, faults=faults, own_frame=own_frame)
+    if drive.faulty:
+        write_tum(drive.posed, tum_path_for(path))
     rng = np.random.default_rng(noise_seed)
-    seen_counts = {w.id: 0 for w in plan.walls}
-
+    eye = _sensor_for(sensor, plan=plan, rate_hz=rate_hz, rng=rng, camera=camera, scanner=scanner)
     with BagSink(path, fmt, compress=compress) as sink:
-        tf_static = sink.topic(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True)
-        tf = sink.topic(TF_TOPIC, "tf2_msgs/msg/TFMessage")
-        odom_conn = sink.topic(ODOM_TOPIC, "nav_msgs/msg/Odometry")
-        truth_conn = sink.topic(GROUND_TRUTH_TOPIC, "geometry_msgs/msg/PoseStamped")
-        if laser:
-            sensor_conn = sink.topic(SCAN_TOPIC, "sensor_msgs/msg/LaserScan")
-        elif sensor == "pointcloud":
-            sensor_conn = sink.topic(POINTS_TOPIC, "sensor_msgs/msg/PointCloud2")
-        else:
-            sensor_conn = sink.topic(IMAGE_TOPIC, "sensor_msgs/msg/Image")
-            info_conn = sink.topic(CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo")
-        # Opened last so that the other topics keep the connection ids they always had.
-        amcl_conn = sink.topic(AMCL_POSE_TOPIC, "geometry_msgs/msg/PoseWithCovarianceStamped")
-
-        if laser:
-            static = _laser_static_tf(sink, stamps_ns[0], scanner)
-        else:
-            static = _camera_static_tf(sink, stamps_ns[0], camera)
-        sink.write(tf_static, stamps_ns[0], static)
-        for k, stamp_ns in enumerate(stamps_ns):
-            odom_pose = se2.matrix(odom.pose_at(k))
-            if k % every_map_odom == 0 or k == len(stamps_ns) - 1:
-                map_odom = se2.matrix(posed.pose_at(k)) @ np.linalg.inv(odom_pose)
-                msg = _planar_transform(sink, stamp_ns, MAP_FRAME, ODOM_FRAME, map_odom)
-                sink.write(tf, stamp_ns, tf_message(sink, msg))
-            msg = _planar_transform(sink, stamp_ns, ODOM_FRAME, BASE_FRAME, odom_pose)
-            sink.write(tf, stamp_ns, tf_message(sink, msg))
-            if k % 2:
-                continue
-
-            pose, given = fine.pose_at(k), posed.pose_at(k)
-            sink.write(odom_conn, stamp_ns, _odometry(sink, stamp_ns, odom.pose_at(k), twist[k]))
-            sink.write(
-                truth_conn,
-                stamp_ns,
-                sink.types["geometry_msgs/msg/PoseStamped"](
-                    header=sink.header(GROUND_TRUTH_TOPIC, stamp_ns, MAP_FRAME),
-                    pose=_pose(sink, *given),
-                ),
-            )
-            sink.write(amcl_conn, stamp_ns, _amcl_pose(sink, stamp_ns, given))
-            if laser:
-                ranges, hit_wall = render_scan(plan, *pose, scanner, rng)
-                seen = scan_walls_seen(hit_wall, ranges)
-                scan = _laser_scan(sink, stamp_ns, ranges, scanner, rate_hz)
-                sink.write(sensor_conn, stamp_ns, scan)
-            else:
-                depth, hit_wall = render_depth(plan, *pose, camera, rng)
-                seen = walls_seen(hit_wall, depth, camera)
-                if sensor == "pointcloud":
-                    cloud = _point_cloud(sink, stamp_ns, depth, camera)
-                    sink.write(sensor_conn, stamp_ns, cloud)
-                else:
-                    image = depth_image(sink, stamp_ns, depth, camera, sensor)
-                    sink.write(sensor_conn, stamp_ns, image)
-                    sink.write(info_conn, stamp_ns, camera_info(sink, stamp_ns, camera))
-            for wall_id in seen:
-                seen_counts[wall_id] += 1
-
-    mount = {"scanner": scanner.to_json()} if laser else {"camera": camera.to_json()}
-    truth_path = truth_path_for(path)
-    truth_path.write_text(
-        json.dumps(
-            {
-                "seed": seed,
-                "format": fmt,
-                "sensor": sensor,
-                "rate_hz": rate_hz,
-                "n_frames": n_frames,
-                **mount,
-                "plan": plan.to_json(),
-                "trajectory": truth.to_json(),
-                "stamps_ns": stamps_ns[::2],
-                "seen_counts": {str(k): v for k, v in seen_counts.items()},
-                "reverse": reverse,
-                "map_in_world": list(map_in_world),
-            }
-        )
+        seen_counts = _write_frames(sink, drive, eye)
+    return _write_truth(
+        path, seed=seed, fmt=fmt, sensor=eye, drive=drive, seen_counts=seen_counts, reverse=reverse
     )
-    return SceneInfo(path, truth_path, n_frames, plan, truth, seen_counts, map_in_world)
 
 
 def load_truth(truth_path: str | Path) -> tuple[FloorPlan, Trajectory, dict[int, int]]:

@@ -190,7 +190,7 @@ class FloorPlan:
         )
 
 
-def _point(values: Sequence[float]) -> Point:
+def _point(values: Sequence[float] | np.ndarray) -> Point:
     return (float(values[0]), float(values[1]))
 
 
@@ -389,15 +389,65 @@ def _walled_plan(
     return plan, curve
 
 
-def _try_plan(
+# A wall a box may stand against, and which way its room lies from it: (p, q, inward).
+_BoxWall = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def _furnish(
     rng: np.random.Generator,
-    n_rooms: int,
-    glass_fraction: float,
-    furniture_per_room: int,
-    pillars_per_room: int,
-    doorway: tuple[float, float] = DOORWAY,
-) -> FloorPlan | None:
-    """One attempt at a plan in strip coordinates (x along the strip); None if invalid."""
+    walls: tuple[Wall, ...],
+    curve: np.ndarray,
+    rooms: Sequence[list[_BoxWall]],
+    per_room: int,
+) -> list[Furniture]:
+    """Up to ``per_room`` boxes against the walls of each room, clear of the route ``curve``.
+
+    A box that does not fit is drawn again, 30 times at the most; then the room has one less.
+    """
+    furniture: list[Furniture] = []
+    for candidates in rooms:
+        for _ in range(per_room):
+            for _ in range(30):
+                p, q, inward = candidates[rng.integers(len(candidates))]
+                box = _furniture_along(rng, p, q, inward)
+                if _box_fits(FloorPlan(walls=walls, furniture=(*furniture, box)), box, curve):
+                    furniture.append(box)
+                    break
+    return furniture
+
+
+@dataclass(frozen=True, eq=False)
+class _Dividers:
+    """The cross walls of a strip of rooms, in strip coordinates, with the side walls' anchors.
+
+    The two end caps (first and last) and, between them, the dividers, each with a doorway.
+
+    Attributes:
+        xs: Where each crosses the strip's axis (y = 0).
+        centers: The centre of each one's doorway (of a cap: where a doorway would be).
+        along: Each one's direction, from its right end to its left.
+        left: Each one's end on the left side wall: the side wall's anchors.
+        right: Each one's end on the right side wall.
+        door_w: Each one's doorway width.
+    """
+
+    xs: np.ndarray
+    centers: list[np.ndarray]
+    along: list[np.ndarray]
+    left: list[np.ndarray]
+    right: list[np.ndarray]
+    door_w: np.ndarray
+
+    def doorway(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """The jambs of divider ``b``'s doorway: its right one, then its left one."""
+        half = self.door_w[b] / 2
+        return self.centers[b] - half * self.along[b], self.centers[b] + half * self.along[b]
+
+
+def _draw_dividers(
+    rng: np.random.Generator, n_rooms: int, doorway: tuple[float, float]
+) -> _Dividers:
+    """Rooms 6.5-8.5 m long, their side walls anchored 2.2-2.8 m either side of the axis."""
     lengths = rng.uniform(6.5, 8.5, n_rooms)
     xs = np.concatenate([[0.0], np.cumsum(lengths)])
     left_y = rng.uniform(2.2, 2.8, n_rooms + 1)
@@ -410,42 +460,46 @@ def _try_plan(
     door_c[[0, -1]] = 0.0
     door_w = rng.uniform(*doorway, n_rooms + 1)
 
-    centers, along, left_anchor, right_anchor = [], [], [], []
+    centers, along, left, right = [], [], [], []
     for b in range(n_rooms + 1):
         u = np.array([math.sin(tilts[b]), math.cos(tilts[b])])
         center = np.array([xs[b], door_c[b]])
         centers.append(center)
         along.append(u)
-        left_anchor.append(center + (left_y[b] - door_c[b]) / math.cos(tilts[b]) * u)
-        right_anchor.append(center - (door_c[b] - right_y[b]) / math.cos(tilts[b]) * u)
+        left.append(center + (left_y[b] - door_c[b]) / math.cos(tilts[b]) * u)
+        right.append(center - (door_c[b] - right_y[b]) / math.cos(tilts[b]) * u)
+    return _Dividers(xs=xs, centers=centers, along=along, left=left, right=right, door_w=door_w)
 
-    left = _side_polyline(rng, left_anchor, 0.8)
-    right = _side_polyline(rng, right_anchor, 0.8)
-    if left is None or right is None:
-        return None
 
-    # Segments in strip coordinates, with the room each side segment belongs to.
-    segments: list[tuple[np.ndarray, np.ndarray]] = []
-    # (room, a, b, direction from the wall towards the strip axis)
-    side_segments: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
-    segments.append((right_anchor[0], left_anchor[0]))
-    segments.append((right_anchor[-1], left_anchor[-1]))
-    for b in range(1, n_rooms):
-        half = door_w[b] / 2
-        segments.append((right_anchor[b], centers[b] - half * along[b]))
-        segments.append((centers[b] + half * along[b], left_anchor[b]))
+def _strip_segments(
+    dividers: _Dividers, left: list[list[np.ndarray]], right: list[list[np.ndarray]]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The strip's walls: the end caps, the dividers either side of their doorways, the sides."""
+    segments = [(dividers.right[0], dividers.left[0]), (dividers.right[-1], dividers.left[-1])]
+    for b in range(1, len(dividers.xs) - 1):
+        right_jamb, left_jamb = dividers.doorway(b)
+        segments.append((dividers.right[b], right_jamb))
+        segments.append((left_jamb, dividers.left[b]))
+    segments += [(p, q) for side in (left, right) for verts in side for p, q in pairwise(verts)]
+    return segments
+
+
+def _side_walls_by_room(
+    left: list[list[np.ndarray]], right: list[list[np.ndarray]]
+) -> list[list[_BoxWall]]:
+    """Per room, the pieces of side wall a box may stand against: the left ones, then the right."""
+    rooms: list[list[_BoxWall]] = [[] for _ in left]
     for inward, side in ((-1.0, left), (1.0, right)):
         for room, verts in enumerate(side):
-            for p, q in pairwise(verts):
-                segments.append((p, q))
-                side_segments.append((room, p, q, np.array([0.0, inward])))
+            rooms[room] += [(p, q, np.array([0.0, inward])) for p, q in pairwise(verts)]
+    return rooms
 
-    if not _walls_well_formed(segments):
-        return None
 
-    # Route: start, through every doorway perpendicular to its divider, end.
+def _strip_route(rng: np.random.Generator, dividers: _Dividers) -> list[np.ndarray]:
+    """Waypoints: the start, through every doorway perpendicular to its divider, the end."""
+    xs, centers, along = dividers.xs, dividers.centers, dividers.along
     route = [np.array([xs[0] + 1.5, 0.0])]
-    for b in range(1, n_rooms):
+    for b in range(1, len(xs) - 1):
         normal = np.array([along[b][1], -along[b][0]])
         before, after = centers[b] - normal, centers[b] + normal
         route.append((route[-1] + before) / 2 + np.array([0.0, rng.uniform(-0.4, 0.4)]))
@@ -453,47 +507,65 @@ def _try_plan(
     end = np.array([xs[-1] - 1.5, 0.0])
     route.append((route[-1] + end) / 2 + np.array([0.0, rng.uniform(-0.4, 0.4)]))
     route.append(end)
+    return route
 
+
+def _strip_rooms(left: list[list[np.ndarray]], right: list[list[np.ndarray]]) -> tuple[Room, ...]:
+    """Each room's outline, as truth: its right side wall, then its left one backwards."""
+    return tuple(
+        Room(r, tuple(_point(p) for p in [*right[r], *left[r][::-1]])) for r in range(len(left))
+    )
+
+
+def _strip_doors(dividers: _Dividers) -> tuple[Door, ...]:
+    """The dividers' doorways, as truth: doorway ``b`` joins rooms ``b - 1`` and ``b``."""
+    doors = []
+    for b in range(1, len(dividers.xs) - 1):
+        right_jamb, left_jamb = dividers.doorway(b)
+        doors.append(Door(b - 1, _point(right_jamb), _point(left_jamb), (b - 1, b)))
+    return tuple(doors)
+
+
+def _try_plan(
+    rng: np.random.Generator,
+    n_rooms: int,
+    glass_fraction: float,
+    furniture_per_room: int,
+    pillars_per_room: int,
+    doorway: tuple[float, float] = DOORWAY,
+) -> FloorPlan | None:
+    """One attempt at a plan in strip coordinates (x along the strip); None if invalid.
+
+    Every random number is drawn in the order it always was: a seed gives the plan it gave.
+    """
+    dividers = _draw_dividers(rng, n_rooms, doorway)
+    left = _side_polyline(rng, dividers.left, 0.8)
+    right = _side_polyline(rng, dividers.right, 0.8)
+    if left is None or right is None:
+        return None
+    segments = _strip_segments(dividers, left, right)
+    if not _walls_well_formed(segments):
+        return None
+    route = _strip_route(rng, dividers)
     walled = _walled_plan(segments, route, rng)
     if walled is None:
         return None
     strip, curve = walled
-    walls, ceiling = strip.walls, strip.ceiling_height
-
-    furniture: list[Furniture] = []
-    for room in range(n_rooms):
-        candidates = [s for s in side_segments if s[0] == room]
-        for _ in range(furniture_per_room):
-            for _ in range(30):
-                _, p, q, inward = candidates[rng.integers(len(candidates))]
-                box = _furniture_along(rng, p, q, inward)
-                trial = FloorPlan(walls=walls, furniture=(*furniture, box))
-                if _box_fits(trial, box, curve):
-                    furniture.append(box)
-                    break
-
-    walls = _with_glass(rng, walls, glass_fraction)
+    rooms = _side_walls_by_room(left, right)
+    furniture = _furnish(rng, strip.walls, curve, rooms, furniture_per_room)
+    walls = _with_glass(rng, strip.walls, glass_fraction)
     # Drawn last, so that plans without pillars come out as they always did.
     for room in range(n_rooms):
+        x_range = (dividers.xs[room], dividers.xs[room + 1])
         for _ in range(pillars_per_room):
-            walls += _place_pillar(rng, walls, furniture, curve, (xs[room], xs[room + 1]))
+            walls += _place_pillar(rng, walls, furniture, curve, x_range)
     return FloorPlan(
         walls=walls,
         furniture=tuple(furniture),
-        ceiling_height=ceiling,
+        ceiling_height=strip.ceiling_height,
         route=strip.route,
-        rooms=tuple(
-            Room(r, tuple(_point(p) for p in [*right[r], *left[r][::-1]])) for r in range(n_rooms)
-        ),
-        doors=tuple(
-            Door(
-                b - 1,
-                _point(centers[b] - door_w[b] / 2 * along[b]),
-                _point(centers[b] + door_w[b] / 2 * along[b]),
-                (b - 1, b),
-            )
-            for b in range(1, n_rooms)
-        ),
+        rooms=_strip_rooms(left, right),
+        doors=_strip_doors(dividers),
     )
 
 
@@ -572,10 +644,26 @@ def _corridor_walls(
     return segments
 
 
-def _try_corridor(
-    rng: np.random.Generator, n_legs: int, glass_fraction: float, furniture_per_room: int
-) -> FloorPlan | None:
-    """One attempt at a corridor plan (x along its first leg); None if invalid."""
+@dataclass(frozen=True, eq=False)
+class _Corridor:
+    """A corridor's straight legs, in its first leg's frame (x along it).
+
+    Attributes:
+        centre: The centre line's vertices (n_legs + 1, 2): where the legs start and end.
+        dirs: Each leg's direction (n_legs, 2).
+        normals: Each leg's left (n_legs, 2).
+        sides: The side walls' vertices, left (0) then right (1): the centre line offset by half
+            the width, mitred at the kinks, ended on the leaning caps.
+    """
+
+    centre: np.ndarray
+    dirs: np.ndarray
+    normals: np.ndarray
+    sides: list[list[np.ndarray]]
+
+
+def _draw_corridor(rng: np.random.Generator, n_legs: int) -> _Corridor:
+    """Legs 6.2-7.2 m long, turning 10-25 degrees at each kink, 1.8-2.5 m wide."""
     lengths = rng.uniform(6.2, 7.2, n_legs)
     turns = rng.choice([-1.0, 1.0], n_legs - 1) * np.radians(rng.uniform(10.0, 25.0, n_legs - 1))
     headings = np.concatenate([[0.0], np.cumsum(turns)])
@@ -586,7 +674,6 @@ def _try_corridor(
     caps = np.radians(rng.uniform(-15.0, 15.0, 2))
     cap_dirs = (se2.rotate(normals[0], caps[0]), se2.rotate(normals[-1], caps[1]))
 
-    # Side walls (0 left, 1 right): the centre line offset by half the width, mitred at kinks.
     sides: list[list[np.ndarray]] = []
     for sign in (1.0, -1.0):
         offset = sign * half_width * normals
@@ -599,84 +686,169 @@ def _try_corridor(
         ]
         verts.append(_line_intersection(centre[-1] + offset[-1], dirs[-1], centre[-1], cap_dirs[1]))
         sides.append(verts)
+    return _Corridor(centre=centre, dirs=dirs, normals=normals, sides=sides)
 
-    # Up to two doors per run, wall pieces of at least _MIN_PIECE between them; most doors
-    # get a small room behind: three walls ending in Ts on the side wall 0.5-1.5 m beyond
-    # the jambs, which keeps the side wall one wall, as it looks from the corridor.
-    doors: dict[tuple[int, int], list[tuple[float, float]]] = {}
-    candidates: list[list[tuple[np.ndarray, np.ndarray]]] = []
-    behind: list[tuple[int, int, int]] = []  # the door each candidate room opens through
-    for side, verts in enumerate(sides):
-        outward = normals * (1.0 if side == 0 else -1.0)
+
+def _run_doors(
+    rng: np.random.Generator, length: float
+) -> tuple[list[tuple[float, float]], np.ndarray] | None:
+    """Up to two doors in a run of side wall ``length`` long, with wall pieces between them.
+
+    Returns:
+        The doors' spans (metres along the run) and the pieces' lengths, each at least
+        ``_MIN_PIECE``; None if the doors drawn do not fit.
+    """
+    k = int(rng.choice(3, p=[0.25, 0.5, 0.25]))
+    widths = rng.uniform(*_DOOR_WIDTH, k)
+    spare = length - widths.sum() - (k + 1) * _MIN_PIECE
+    if spare < 0:
+        return None
+    pieces = _MIN_PIECE + spare * rng.dirichlet(np.ones(k + 1))
+    s0 = np.cumsum(pieces[:-1]) + np.concatenate([[0.0], np.cumsum(widths[:-1])])
+    return [(float(a), float(a + w)) for a, w in zip(s0, widths, strict=True)], pieces
+
+
+def _room_behind(
+    rng: np.random.Generator,
+    *,
+    start: np.ndarray,
+    unit: np.ndarray,
+    span: tuple[float, float],
+    pieces: tuple[float, float],
+    outward: np.ndarray,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The three walls of a small room behind the door ``span`` of the run from ``start``.
+
+    They end in Ts on the side wall 0.5-1.5 m beyond the jambs, which keeps the side wall one
+    wall, as it looks from the corridor; the Ts stay at least ``_MIN_WALL_GAP`` from the ends
+    of the ``pieces`` of side wall either side of the door.
+    """
+    a = start + (span[0] - rng.uniform(0.5, min(1.5, pieces[0] - _MIN_WALL_GAP))) * unit
+    b = start + (span[1] + rng.uniform(0.5, min(1.5, pieces[1] - _MIN_WALL_GAP))) * unit
+    depth_a, depth_b = rng.uniform(2.0, 3.0, 2)
+    lean_a, lean_b = np.radians(rng.uniform(-20.0, 20.0, 2))
+    far_a = a + depth_a * se2.rotate(outward, lean_a)
+    far_b = b + depth_b * se2.rotate(outward, lean_b)
+    return [(a, far_a), (far_a, far_b), (far_b, b)]
+
+
+@dataclass(frozen=True, eq=False)
+class _SideDoors:
+    """The doors of a corridor's side walls and the rooms that may open behind them.
+
+    Attributes:
+        spans: Per (side, run), its doors' spans in metres along the run.
+        rooms: The walls of each room drawn behind a door (about two doors in three).
+        behind: The door each room opens through: (side, run, door).
+    """
+
+    spans: dict[tuple[int, int], list[tuple[float, float]]]
+    rooms: list[list[tuple[np.ndarray, np.ndarray]]]
+    behind: list[tuple[int, int, int]]
+
+    def on_both_sides(self, n_legs: int) -> bool:
+        """At least three doors, and some on each side."""
+        total = sum(map(len, self.spans.values()))
+        return total >= 3 and all(
+            any(self.spans[side, run] for run in range(n_legs)) for side in (0, 1)
+        )
+
+
+def _draw_side_doors(rng: np.random.Generator, corridor: _Corridor) -> _SideDoors | None:
+    """Doors in every run of side wall, most with a room behind; None if some did not fit."""
+    doors = _SideDoors(spans={}, rooms=[], behind=[])
+    for side, verts in enumerate(corridor.sides):
+        outward = corridor.normals * (1.0 if side == 0 else -1.0)
         for run, (start, end) in enumerate(pairwise(verts)):
             length = float(np.linalg.norm(end - start))
-            unit = (end - start) / length
-            k = int(rng.choice(3, p=[0.25, 0.5, 0.25]))
-            widths = rng.uniform(*_DOOR_WIDTH, k)
-            spare = length - widths.sum() - (k + 1) * _MIN_PIECE
-            if spare < 0:
+            drawn = _run_doors(rng, length)
+            if drawn is None:
                 return None
-            pieces = _MIN_PIECE + spare * rng.dirichlet(np.ones(k + 1))
-            s0 = np.cumsum(pieces[:-1]) + np.concatenate([[0.0], np.cumsum(widths[:-1])])
-            doors[side, run] = [(float(a), float(a + w)) for a, w in zip(s0, widths, strict=True)]
-            for j, (d0, d1) in enumerate(doors[side, run]):
+            doors.spans[side, run], pieces = drawn
+            for j, span in enumerate(doors.spans[side, run]):
                 if rng.random() < 0.3:
                     continue
-                # Ts at least _MIN_WALL_GAP from the ends of their piece of side wall.
-                a = start + (d0 - rng.uniform(0.5, min(1.5, pieces[j] - _MIN_WALL_GAP))) * unit
-                b = start + (d1 + rng.uniform(0.5, min(1.5, pieces[j + 1] - _MIN_WALL_GAP))) * unit
-                depth_a, depth_b = rng.uniform(2.0, 3.0, 2)
-                lean_a, lean_b = np.radians(rng.uniform(-20.0, 20.0, 2))
-                far_a = a + depth_a * se2.rotate(outward[run], lean_a)
-                far_b = b + depth_b * se2.rotate(outward[run], lean_b)
-                candidates.append([(a, far_a), (far_a, far_b), (far_b, b)])
-                behind.append((side, run, j))
-    if sum(map(len, doors.values())) < 3 or not all(
-        any(doors[side, run] for run in range(n_legs)) for side in (0, 1)
-    ):
-        return None
-    segments = _corridor_walls(sides, doors)
-    if not _walls_well_formed(segments):
-        return None
-    # A room that would come too near another wall stays a plain gap.
+                room = _room_behind(
+                    rng,
+                    start=start,
+                    unit=(end - start) / length,
+                    span=span,
+                    pieces=(pieces[j], pieces[j + 1]),
+                    outward=outward[run],
+                )
+                doors.rooms.append(room)
+                doors.behind.append((side, run, j))
+    return doors
+
+
+def _open_rooms(
+    segments: list[tuple[np.ndarray, np.ndarray]], doors: _SideDoors
+) -> tuple[
+    list[tuple[np.ndarray, np.ndarray]],
+    list[list[tuple[np.ndarray, np.ndarray]]],
+    dict[tuple[int, int, int], int],
+]:
+    """The rooms that fit among the walls, each in turn; one too near a wall stays a plain gap.
+
+    Returns:
+        The walls with those rooms', the rooms, and per door the truth id of the room behind it.
+    """
     rooms: list[list[tuple[np.ndarray, np.ndarray]]] = []
-    opened: dict[tuple[int, int, int], int] = {}  # door -> the truth id of the room behind it
-    for room, door in zip(candidates, behind, strict=True):
+    opened: dict[tuple[int, int, int], int] = {}
+    for room, door in zip(doors.rooms, doors.behind, strict=True):
         if _walls_well_formed([*segments, *room], tees=True):
-            segments += room
+            segments = [*segments, *room]
             rooms.append(room)
             opened[door] = len(rooms)
-    if not rooms:
-        return None
+    return segments, rooms, opened
 
+
+def _corridor_route(corridor: _Corridor) -> list[np.ndarray]:
+    """Waypoints down the corridor's middle, straight through each kink."""
+    centre, dirs = corridor.centre, corridor.dirs
     route = [centre[0] + 1.5 * dirs[0]]
-    for i in range(1, n_legs):
+    for i in range(1, len(dirs)):
         route += [centre[i] - 0.8 * dirs[i - 1], centre[i], centre[i] + 0.8 * dirs[i]]
     route.append(centre[-1] - 1.5 * dirs[-1])
+    return route
 
-    walled = _walled_plan(segments, route, rng)
+
+def _room_walls(room: list[tuple[np.ndarray, np.ndarray]]) -> list[_BoxWall]:
+    """A side room's three walls, each with the way to the room's middle."""
+    middle = np.mean([p for p, _ in room] + [room[-1][1]], axis=0)
+    return [(p, q, middle - (p + q) / 2) for p, q in room]
+
+
+def _try_corridor(
+    rng: np.random.Generator, n_legs: int, glass_fraction: float, furniture_per_room: int
+) -> FloorPlan | None:
+    """One attempt at a corridor plan (x along its first leg); None if invalid.
+
+    Every random number is drawn in the order it always was: a seed gives the plan it gave.
+    """
+    corridor = _draw_corridor(rng, n_legs)
+    doors = _draw_side_doors(rng, corridor)
+    if doors is None or not doors.on_both_sides(n_legs):
+        return None
+    segments = _corridor_walls(corridor.sides, doors.spans)
+    if not _walls_well_formed(segments):
+        return None
+    segments, rooms, opened = _open_rooms(segments, doors)
+    if not rooms:
+        return None
+    walled = _walled_plan(segments, _corridor_route(corridor), rng)
     if walled is None:
         return None
     plan, curve = walled
-    walls, ceiling = plan.walls, plan.ceiling_height
-
-    furniture: list[Furniture] = []
-    for room in rooms:
-        middle = np.mean([p for p, _ in room] + [room[-1][1]], axis=0)
-        for _ in range(furniture_per_room):
-            for _ in range(30):
-                p, q = room[rng.integers(3)]
-                box = _furniture_along(rng, p, q, middle - (p + q) / 2)
-                if _box_fits(FloorPlan(walls=walls, furniture=(*furniture, box)), box, curve):
-                    furniture.append(box)
-                    break
+    box_walls = [_room_walls(room) for room in rooms]
+    furniture = _furnish(rng, plan.walls, curve, box_walls, furniture_per_room)
     return FloorPlan(
-        walls=_with_glass(rng, walls, glass_fraction),
+        walls=_with_glass(rng, plan.walls, glass_fraction),
         furniture=tuple(furniture),
-        ceiling_height=ceiling,
+        ceiling_height=plan.ceiling_height,
         route=plan.route,
-        rooms=_corridor_rooms(sides, rooms),
-        doors=_corridor_doors(sides, doors, opened),
+        rooms=_corridor_rooms(corridor.sides, rooms),
+        doors=_corridor_doors(corridor.sides, doors.spans, opened),
     )
 
 

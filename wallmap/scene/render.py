@@ -296,6 +296,27 @@ def _cast_vertical(
     return t_hit, label, glass
 
 
+def _cast_everything(
+    plan: FloorPlan, origin: np.ndarray, rays: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First hit of each ray on walls, furniture, floor or ceiling: (t, wall id or -1, glass).
+
+    A camera sees all of them, unlike a scanner's level beams, which meet only what stands.
+    """
+    geo = _geometry(plan)
+    depth, label, glass = _cast_vertical(geo, origin, rays, reach)
+    rz = rays[:, 2]
+    with np.errstate(divide="ignore"):
+        planes = np.where(rz < 0, -origin[2] / rz, (plan.ceiling_height - origin[2]) / rz)
+    planes[rz == 0] = np.inf
+    other = np.minimum(planes, _nearest_box_top(origin, rays, geo))
+    closer = other < depth
+    depth[closer] = other[closer]
+    label[closer] = -1
+    glass[closer] = False
+    return depth, label, glass
+
+
 def render_depth(
     plan: FloorPlan,
     x: float,
@@ -326,7 +347,6 @@ def render_depth(
         included, though it gives no return), -1 for floor, ceiling, furniture, out of
         range or nothing.
     """
-    geo = _geometry(plan)
     rays_cam = _pixel_rays(camera)
     mount = camera.T_base_camera if mount is None else mount
     c, s = math.cos(yaw), math.sin(yaw)
@@ -335,24 +355,14 @@ def render_depth(
     rays = rays_cam @ (r_world_base @ mount[:3, :3]).T
 
     reach = camera.max_range * float(np.linalg.norm(rays_cam, axis=1).max())
-    depth, label, glass = _cast_vertical(geo, origin, rays, reach)
-    n = len(rays)
-
-    rz = rays[:, 2]
-    with np.errstate(divide="ignore"):
-        planes = np.where(rz < 0, -origin[2] / rz, (plan.ceiling_height - origin[2]) / rz)
-    planes[rz == 0] = np.inf
-    other = np.minimum(planes, _nearest_box_top(origin, rays, geo))
-    closer = other < depth
-    depth[closer] = other[closer]
-    label[closer] = -1
-    glass[closer] = False
+    depth, label, glass = _cast_everything(plan, origin, rays, reach)
 
     in_range = (depth >= camera.min_range) & (depth <= camera.max_range)
     label[~in_range] = -1
     valid = in_range & ~glass
     if rng is not None and camera.noise_k > 0:
-        depth = depth + rng.normal(size=n) * camera.noise_k * np.where(valid, depth, 0.0) ** 2
+        noise = rng.normal(size=len(rays)) * camera.noise_k
+        depth = depth + noise * np.where(valid, depth, 0.0) ** 2
     shape = (camera.height, camera.width)
     return (
         np.where(valid, depth, np.nan).astype(np.float32).reshape(shape),

@@ -76,6 +76,22 @@ def _arc_length_at(t: np.ndarray, duration: float, speed: float) -> np.ndarray:
     return s
 
 
+def _path(plan: FloorPlan, *, reverse: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The smoothed route, driven forward or ``reverse``: points (K, 2), arc length and heading.
+
+    Repeated points are dropped, so that the arc length increases and the heading is defined
+    everywhere.
+    """
+    # Corner cutting is symmetric: the reversed route's curve is the forward one, reversed.
+    curve = smooth_route(plan.route[::-1] if reverse else plan.route)
+    steps = np.linalg.norm(np.diff(curve, axis=0), axis=1)
+    keep = np.concatenate([[True], steps > 1e-9])
+    curve = curve[keep]
+    s_curve = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
+    tangent = np.gradient(curve, s_curve, axis=0)
+    return curve, s_curve, np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0]))
+
+
 def generate_trajectory(
     plan: FloorPlan,
     seed: int,
@@ -116,15 +132,8 @@ def generate_trajectory(
     """
     if len(plan.route) < 2:
         raise ValueError("the plan has no route to drive along")
-    # Corner cutting is symmetric: the reversed route's curve is the forward one, reversed.
-    curve = smooth_route(plan.route[::-1] if reverse else plan.route)
-    steps = np.linalg.norm(np.diff(curve, axis=0), axis=1)
-    keep = np.concatenate([[True], steps > 1e-9])
-    curve = curve[keep]
-    s_curve = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
+    curve, s_curve, heading_curve = _path(plan, reverse=reverse)
     length = float(s_curve[-1])
-    tangent = np.gradient(curve, s_curve, axis=0)
-    heading_curve = np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0]))
 
     duration = length / speed + _RAMP_S
     t = np.arange(math.floor(duration * rate_hz) + 1) / rate_hz

@@ -28,14 +28,9 @@ from urllib.parse import parse_qs, urlsplit
 import zenoh
 
 from wallmap.common.codec import MessageError, decode
-from wallmap.common.map_query import (
-    MalformedReplyError,
-    MapQuery,
-    QueryError,
-    fetch_map,
-    fetch_rooms,
-)
+from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply, MapUpdate
+from wallmap.common.map_requests import MalformedReplyError, QueryError, fetch_map, fetch_rooms
 from wallmap.common.messages import unpack_observations, unpack_pose
 from wallmap.common.runtime import Stats, drain, setup_logging, stop_on_signals
 from wallmap.common.transport import (

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-from wallmap.common.transport import (
-    ZenohSettings,
-    make_config,
-)
+from wallmap.common.link_settings import ZenohSettings
+from wallmap.common.transport import make_config
 
 
 def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):

@@ -10,7 +10,7 @@ import pytest
 
 from wallmap.common import config_file
 from wallmap.common.config_file import ConfigError
-from wallmap.common.transport import TransportError
+from wallmap.common.link_settings import TransportError
 from wallmap.config import Config, configured, resolve, to_toml
 from wallmap.offline import map_bag, walls
 

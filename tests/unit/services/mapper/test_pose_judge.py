@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace as replaced
 
 import numpy as np
 import pytest
@@ -20,8 +21,10 @@ from wallmap.evaluation import evaluate_map
 from wallmap.offline import run_bag, walls
 from wallmap.scene import Glitch, PoseFaults
 from wallmap.scene.bags import tum_path_for
+from wallmap.services.mapper import restore, state_file
 from wallmap.services.mapper.pose_buffer import PoseBuffer, SourcePose
 from wallmap.services.mapper.pose_judge import JudgeConfig, PoseJudge
+from wallmap.services.mapper.settings import MapperSettings
 from wallmap.services.mapper.wall_map import WallMap
 
 GLITCH = Glitch(start=15.0, duration=3.0, yaw_deg=12.0, offset_m=0.1)
@@ -205,18 +208,14 @@ def test_the_judge_goes_on_from_its_state_file_entry_exactly() -> None:
 def test_a_mapper_restored_on_a_state_file_takes_its_judge_or_says_why_not(tmp_path) -> None:
     """The judge a state file kept is the one a restarted mapper goes on with; a damaged entry
     is one readable line, not a traceback."""
-    from dataclasses import replace as replaced  # the service shell, imported where it is tested
-
-    from wallmap.services.mapper import service
-
     judge, _, _ = _mapped_room()
     state = tmp_path / "map.json"
     state.write_text(json.dumps({"poses": judge.to_json()}))
-    settings = replaced(service.MapperSettings(), state=state, judge=judge.config)
-    assert service._judge(settings).summary() == judge.summary()
+    settings = replaced(MapperSettings(), state=state, judge=judge.config)
+    assert restore.judge_of(settings).summary() == judge.summary()
     state.write_text(json.dumps({"poses": {**judge.to_json(), "offset": [1.0]}}))
-    with pytest.raises(service.state_file.StateError, match="unusable 'poses' entry"):
-        service._judge(settings)
+    with pytest.raises(state_file.StateError, match="unusable 'poses' entry"):
+        restore.judge_of(settings)
 
 
 def test_after_the_source_jumps_a_frame_no_wall_can_check_starts_none_for_a_while() -> None:
