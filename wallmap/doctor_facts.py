@@ -1,10 +1,11 @@
 """The facts ``wallmap doctor`` reports, as plain dataclasses that turn into JSON as they are.
 
-Kept apart from the code that gathers them (``doctor_inspect``) and the code that prints them
-(``doctor``) so a script reading ``wallmap doctor --json`` has one place that says what each
-field means. Times called ``start``/``at`` are seconds since the report's ``t0`` (the first sensor
-header stamp, or the first pose stamp of a bag without a sensor), because absolute ROS stamps
-are unreadable and may come from a simulated clock.
+Kept apart from the code that gathers them (``doctor_inspect`` and the modules it calls), the
+code that concludes from them (``doctor_verdict``) and the code that words them (``doctor_text``)
+so a script reading ``wallmap doctor --json`` has one place that says what each field means.
+Times called ``start``/``at`` are seconds since the report's ``t0`` (the first sensor header
+stamp, or the first pose stamp of a bag without a sensor), because absolute ROS stamps are
+unreadable and may come from a simulated clock.
 """
 
 from dataclasses import dataclass, field

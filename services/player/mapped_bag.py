@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import heapq
 import mmap
-import struct
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -20,13 +19,11 @@ from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1.reader import decompressors
 
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.ros1_records import OP_CONNECTION, OP_MSGDATA, UINT32, record_header
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
-
-_UINT32 = struct.Struct("<L")
-_MSGDATA, _CONNECTION = b"\x02", b"\x07"  # record "op" codes of the bag format 2.0
 
 
 def mapped_messages(
@@ -63,31 +60,14 @@ def _messages(
     for entry in entries:
         pos = chunks[entry.chunk_pos].datapos + entry.offset
         while True:  # connection records may precede a message, as rosbags also allows
-            fields, pos = _header(view, pos)
-            (size,) = _UINT32.unpack_from(view, pos)
+            fields, pos = record_header(view, pos)
+            (size,) = UINT32.unpack_from(view, pos)
             pos += 4
-            if fields.get("op") != _CONNECTION:
+            if fields.get("op") != OP_CONNECTION:
                 break
             pos += size
-        if fields.get("op") != _MSGDATA or pos + size > len(view):
+        if fields.get("op") != OP_MSGDATA or pos + size > len(view):
             msg = f"no message data where the bag's index points (byte {pos})"
             raise PlayerError(msg)
-        (conn,) = _UINT32.unpack(fields["conn"])
+        (conn,) = UINT32.unpack(fields["conn"])
         yield by_id[conn], entry.time, view[pos : pos + size]
-
-
-def _header(view: memoryview, pos: int) -> tuple[dict[str, bytes], int]:
-    """A record header's fields (name -> raw value) and the position after it."""
-    (length,) = _UINT32.unpack_from(view, pos)
-    pos += 4
-    end = pos + length
-    if end > len(view):
-        msg = f"a record header at byte {pos} runs past the end of the file"
-        raise PlayerError(msg)
-    fields = {}
-    while pos < end:
-        (size,) = _UINT32.unpack_from(view, pos)
-        name, _, value = bytes(view[pos + 4 : pos + 4 + size]).partition(b"=")
-        fields[name.decode("ascii", "replace")] = value
-        pos += 4 + size
-    return fields, end

@@ -14,9 +14,10 @@ from conftest import REAL_DATA
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.cli import main as wallmap_main
-from wallmap.doctor import add_command, render_text, report_json
+from wallmap.doctor import add_command, report_json
 from wallmap.doctor_facts import Report
 from wallmap.doctor_inspect import inspect_bag
+from wallmap.doctor_text import render_text
 from wallmap.options import given
 from wallmap.scene import write_scene_bag
 from wallmap.services.player.bag_source import BagSource
@@ -254,6 +255,29 @@ def test_real_damaged_index_keeps_its_bag_header(capsys: pytest.CaptureFixture[s
         "conn_count": 1,
         "index_pos": 1_029_025,
     }
+
+
+@pytest.mark.parametrize("damage", ["cut", "no-equals"])
+def test_a_damaged_bag_header_is_left_out(
+    damage: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bag header that is itself damaged says nothing: no header line, the player's reason."""
+    good = write_bag(tmp_path / "good.bag", [Record("/scan", SCAN, scan(T0), T0)])
+    data = good.read_bytes()
+    start = data.index(b"\n") + 1 + 4  # the header record's first field
+    if damage == "cut":
+        data = data[: start + 10]
+    else:  # the first field's '=' gone: a field rosbags refuses too
+        data = data[:start] + data[start:].replace(b"=", b"_", 1)
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(data)
+    status, text = run(path, capsys=capsys)
+    assert status == 1
+    assert "bag header" not in text
+    assert flat(f"verdict  cannot be played: {player_error(path)}") in flat(text)
+    facts = json.loads(run(path, "--json", capsys=capsys)[1])
+    assert facts["file"]["format"] == "ros1"
+    assert facts["file"]["ros1_header"] is None
 
 
 def test_real_nav2_bag_has_poses_but_no_sensor(capsys: pytest.CaptureFixture[str]) -> None:
