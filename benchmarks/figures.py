@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from wallmap.common import ekf
-from wallmap.common.messages import Frame
 from wallmap.scene import write_scene_bag
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper import wall_map as wall_map_module
@@ -107,9 +106,7 @@ def main() -> None:
         )
         with BagSource(info.path) as source:
             for seq, (frame, pose) in enumerate(source.frames()):
-                message = Frame(
-                    "fig", seq, frame.stamp, frame.frame_id, frame.points, frame.T_base_sensor
-                )
+                message = frame.to_frame(run="fig", seq=seq, sensor="depth")
                 association.clear()
                 updates.clear()
                 start = time.perf_counter()

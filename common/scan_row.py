@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -261,13 +261,18 @@ def free_rays(stack: NDArray[np.float32], T_base_sensor: Array) -> tuple[Array, 
     return origin, ends
 
 
+def finite_rows(points: Array) -> Array:
+    """The rows of ``points`` (n x k) with no NaN or infinity: the returns a sensor had."""
+    return points[np.isfinite(points).all(axis=1)]
+
+
 def scan_free_rays(scan: Array, T_base_sensor: Array) -> tuple[Array, Array]:
     """A scanner's free rays: its position and its returns (n, 2, base frame), evenly sampled.
 
     Every beam of a 2-D scanner ends where it met something, at the one height it sees.
     """
     origin = np.asarray(T_base_sensor, dtype=np.float64)[:2, 3].copy()
-    ends = scan[np.isfinite(scan).all(axis=1)]
+    ends = finite_rows(scan)
     if len(ends) > MAX_FREE_RAYS:
         ends = ends[_evenly_spread(len(ends))]
     return origin, ends
@@ -284,3 +289,35 @@ def select_scan(
 ) -> Array:
     """The scan row as 2-D points in the base frame (columns x 2, NaN for no point)."""
     return to_base_xy(select_points(points, T_base_sensor, how, stacked), T_base_sensor)
+
+
+class CloudFrame(Protocol):
+    """What ``finite_scan`` reads of a frame: a player's ``SensorFrame`` or a wire ``Frame``.
+
+    A protocol because this layer sees neither class: the player's is a service's.
+    """
+
+    @property
+    def points(self) -> NDArray[np.float32]:
+        """The sensor-frame points: a whole cloud, a scan, or the band's stack."""
+        ...
+
+    @property
+    def T_base_sensor(self) -> Array:
+        """The sensor's mount in the base frame."""
+        ...
+
+    @property
+    def band(self) -> tuple[float, float] | None:
+        """The band ``points`` is the stack of, or None when it is no stack."""
+        ...
+
+
+def finite_scan(frame: CloudFrame, how: RowSelection) -> Array:
+    """A frame's scan row with only the points it has (n x 2, base frame).
+
+    What scan matching reads of a frame, the same whether the odometry service, the in-process
+    pipeline or a script asks: a frame with a band carries the stack the player picked.
+    """
+    scan = select_scan(frame.points, frame.T_base_sensor, how, frame.band is not None)
+    return finite_rows(scan)

@@ -16,10 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from wallmap.common.messages import Frame, Observations, Pose
-from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.scan_row import RowSelection, finite_scan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.map_config import MapperConfig
 from wallmap.services.mapper.mapping import Mapping
@@ -100,5 +98,4 @@ class Pipeline:
 
     def _track(self, frame: Frame) -> Pose:
         assert self.tracker is not None
-        scan = select_scan(frame.points, frame.T_base_sensor, self.rows, frame.band is not None)
-        return self.tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp).pose
+        return self.tracker.update(finite_scan(frame, self.rows), frame.stamp).pose

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, Pose
-from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.scan_row import RowSelection, finite_scan
 from wallmap.common.se2 import transform_points
 from wallmap.config import Config, with_odometry_poses
 from wallmap.services.mapper import serving
@@ -97,17 +97,7 @@ def played(bag: Path, config: Config, pipeline: Pipeline) -> Iterator[Frame]:
         for seq, (frame, _) in enumerate(recording.frames(pipeline.rows)):
             for pose in stream.until(frame.stamp):
                 pipeline.add_pose(pose)
-            yield Frame(
-                "offline",
-                seq,
-                frame.stamp,
-                frame.frame_id,
-                frame.points,
-                frame.T_base_sensor,
-                sensor,
-                band=frame.band,
-                sweep=frame.sweep,
-            )
+            yield frame.to_frame(run="offline", seq=seq, sensor=sensor)
 
 
 def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[float, Array]]:
@@ -118,8 +108,7 @@ def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[flo
     how = rows or RowSelection()
     with open_source(bag, SourceOptions(pose_source="none")) as recording:
         for frame, _ in recording.frames(how):
-            scan = select_scan(frame.points, frame.T_base_sensor, how, frame.band is not None)
-            yield frame.stamp, scan[np.isfinite(scan).all(axis=1)]
+            yield frame.stamp, finite_scan(frame, how)
 
 
 def rooms(pipeline: Pipeline) -> RoomsReply:

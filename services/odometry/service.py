@@ -13,7 +13,6 @@ import logging
 import queue
 import threading
 
-import numpy as np
 import zenoh
 from zenoh.ext import AdvancedPublisher
 
@@ -23,7 +22,7 @@ from wallmap.common.link_settings import History, ZenohSettings
 from wallmap.common.map_requests import MalformedReplyError, QueryError, fetch_map
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, setup_logging
-from wallmap.common.scan_row import RowSelection, select_scan
+from wallmap.common.scan_row import RowSelection, finite_scan
 from wallmap.common.transport import Keys, open_session
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
 
@@ -136,8 +135,7 @@ def _work(
             )
         if updates is not None:  # the walls are used
             _take_updates(updates, tracker, stats)
-        scan = select_scan(frame.points, frame.T_base_sensor, rows, frame.band is not None)
-        estimate = tracker.update(scan[np.isfinite(scan).all(axis=1)], frame.stamp)
+        estimate = tracker.update(finite_scan(frame, rows), frame.stamp)
         if not estimate.registration.accepted:
             reason = estimate.registration.reason
             stats.note("unmatched", reason, f"scan at {frame.stamp:.3f} not matched: {reason}")

@@ -7,6 +7,7 @@ from typing import Self
 
 import numpy as np
 
+from wallmap.common.messages import Frame
 from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
 
 
@@ -34,6 +35,26 @@ class SensorFrame:
     bag_time: float = 0.0
     band: tuple[float, float] | None = None
     sweep: float = 0.0
+
+    def to_frame(self, *, run: str, seq: int, sensor: str, lossless: bool = False) -> Frame:
+        """The wire ``Frame`` a player sends of this one, as frame ``seq`` of ``run``.
+
+        One place for it, so the player, the ROS 2 source and the offline runner send alike.
+        ``sensor`` is ``depth`` or ``scan`` (whose noise the points carry); ``lossless``: the
+        player waits for the pipeline (``--fast``).
+        """
+        return Frame(
+            run=run,
+            seq=seq,
+            stamp=self.stamp,
+            frame_id=self.frame_id,
+            points=self.points,
+            T_base_sensor=self.T_base_sensor,
+            sensor=sensor,
+            lossless=lossless,
+            band=self.band,
+            sweep=self.sweep,
+        )
 
 
 def hand_out(

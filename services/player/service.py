@@ -28,7 +28,7 @@ from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
 from wallmap.common.delivery import AckWindow, declare_history_publisher
 from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
-from wallmap.common.messages import Frame, pack
+from wallmap.common.messages import pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, make_config, open_session
@@ -191,17 +191,8 @@ class _Outlet:
             self._poses.put(pack(pose))
             self.poses += 1
         message = pack(
-            Frame(
-                self._run,
-                self.published,
-                frame.stamp,
-                frame.frame_id,
-                frame.points,
-                frame.T_base_sensor,
-                self._sensor,
-                self.lossless,
-                frame.band,
-                frame.sweep,
+            frame.to_frame(
+                run=self._run, seq=self.published, sensor=self._sensor, lossless=self.lossless
             )
         )
         if self._frames is None:

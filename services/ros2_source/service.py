@@ -26,7 +26,7 @@ from zenoh import ext
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import declare_history_publisher
 from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
-from wallmap.common.messages import Frame, Pose, pack
+from wallmap.common.messages import Pose, pack
 from wallmap.common.ros2_types import deserialize_cdr
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
 from wallmap.common.runtime import Presence, Stats, setup_logging
@@ -34,6 +34,7 @@ from wallmap.common.transport import Keys, open_session
 from wallmap.services.detector_rows import ask_rows
 from wallmap.services.mapper.pose_input import TF_TYPE
 from wallmap.services.player.bag_contents import CAMERA_INFO, IMAGE, LASERSCAN
+from wallmap.services.player.frames import SensorFrame
 from wallmap.services.ros2_source.discovery import discover_sensor
 from wallmap.services.ros2_source.live import LiveFrames
 from wallmap.services.ros2_source.settings import Ros2Settings
@@ -226,21 +227,8 @@ class _Outlet:
         for pose in poses:
             self._poses.put(pack(pose))
 
-    def frame(self, frame: Any) -> None:
-        message = pack(
-            Frame(
-                self._run,
-                self.published,
-                frame.stamp,
-                frame.frame_id,
-                frame.points,
-                frame.T_base_sensor,
-                self._sensor,
-                False,
-                frame.band,
-                frame.sweep,
-            )
-        )
+    def frame(self, frame: SensorFrame) -> None:
+        message = pack(frame.to_frame(run=self._run, seq=self.published, sensor=self._sensor))
         if self._frames is None:
             samples = self._history.samples(MAX_RATE, len(message))
             self._frames = declare_history_publisher(self._session, self._keys.frames, samples)

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from wallmap.common.messages import Frame
 from wallmap.common.scan_row import (
     STACK,
     RowSelection,
     band_stack,
+    finite_scan,
     free_rays,
     select_points,
+    select_scan,
     upright_points,
 )
 
@@ -82,6 +87,22 @@ def test_a_whole_cloud_and_the_players_stack_give_the_same_row() -> None:
     np.testing.assert_array_equal(
         select_points(cloud, np.eye(4), how), select_points(stack, np.eye(4), how, stacked=True)
     )
+
+
+def test_a_frames_finite_scan_is_its_scan_row_without_the_missing_points() -> None:
+    """A cloud's and the player's stack's frames give the same returns, every point finite."""
+    cloud = np.full((64, WIDTH, 3), np.nan, np.float32)
+    cloud[..., 0] = 3.0
+    cloud[..., 1] = np.linspace(-1, 1, WIDTH)
+    cloud[..., 2] = np.linspace(2.2, 0.2, 64)[:, None]
+    cloud[:, :5] = np.nan  # columns that saw nothing
+    how = RowSelection(band=BAND)
+    whole = Frame("run", 0, 1.0, "camera", cloud, np.eye(4))
+    stacked = replace(whole, points=band_stack(cloud, np.eye(4), BAND), band=BAND)
+    scan = finite_scan(whole, how)
+    assert scan.shape == (WIDTH - 5, 2)
+    np.testing.assert_array_equal(scan, select_scan(cloud, np.eye(4), how)[5:])
+    np.testing.assert_array_equal(finite_scan(stacked, how), scan)
 
 
 def test_free_rays_end_at_the_farthest_return_of_each_column() -> None:
