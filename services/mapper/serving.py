@@ -80,7 +80,7 @@ def _shadowed(wall_map: WallMap, wall: Wall) -> bool:
         if other is wall or other.n_obs < cfg.shadow_ratio * wall.n_obs:
             continue
         fx, fy, _, _, nx, ny = other.frame
-        if abs(wall.frame[4] * nx + wall.frame[5] * ny) < cos_max:
+        if abs(wall.frame.nx * nx + wall.frame.ny * ny) < cos_max:
             continue
         # Both ends beyond the band on one side: no point between them is inside it.
         da, db = (ax - fx) * nx + (ay - fy) * ny, (bx - fx) * nx + (by - fy) * ny

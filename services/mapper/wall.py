@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +21,17 @@ from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.map_config import MapperConfig
 
 Array = NDArray[np.float64]
+
+
+class LineFrame(NamedTuple):
+    """A wall's line as plain floats, for hot loops: its foot point, direction and normal."""
+
+    fx: float
+    fy: float
+    dx: float
+    dy: float
+    nx: float
+    ny: float
 
 
 @dataclass
@@ -57,7 +69,7 @@ class Wall:
         self.normal = np.array([nx, ny])
         self.direction = np.array([-ny, nx])  # wall_model.direction, in floats
         # The same as plain floats, and the extent's span along the line, for _near's hot loop.
-        self.frame = (fx, fy, -ny, nx, nx, ny)
+        self.frame = LineFrame(fx, fy, -ny, nx, nx, ny)
         self.span = self.span_of(self.ends.tolist())
 
     def span_of(self, points: list[list[float]]) -> tuple[float, float]:
