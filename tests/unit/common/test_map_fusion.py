@@ -85,8 +85,9 @@ def test_a_gap_wider_than_join_gap_keeps_two_walls() -> None:
     a, b = _wall(1, (0.0, 1.0), (3.0, 1.0)), _wall(2, (3.5, 1.0), (6.0, 1.0))
     assert len(fuse_walls([("a", a), ("b", b)])) == 1
     assert len(fuse_walls([("a", a), ("b", b)], FuseConfig(join_gap=0.3))) == 2
-    turned = _wall(3, (0.0, 1.0), (3.0, 1.0 + 3.0 * math.tan(math.radians(8.0))))
-    assert len(fuse_walls([("a", a), ("b", turned)])) == 2, "8 degrees apart: two walls"
+    rise = 1.5 * math.tan(math.radians(10.0))  # turned about a's middle: the lines cross there
+    turned = _wall(3, (0.0, 1.0 - rise), (3.0, 1.0 + rise))
+    assert len(fuse_walls([("a", a), ("b", turned)])) == 2, "10 degrees apart: two walls"
 
 
 def test_fleet_ids_stay_and_a_merge_is_reported() -> None:
