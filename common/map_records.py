@@ -16,9 +16,22 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from wallmap.common.codec import MessageError, check_coordinates
+from wallmap.common.codec import check_coordinates
+from wallmap.common.fields import (
+    Point,
+    flag,
+    integer,
+    listed,
+    matrix2,
+    number,
+    optional_number,
+    point,
+    refusal,
+    required,
+    string,
+    table,
+)
 
-Point = tuple[float, float]
 Segment = tuple[Point, Point]
 COUNTERS = (
     "dropped",
@@ -30,40 +43,6 @@ COUNTERS = (
     "slam",
     "pose_source",
 )
-
-
-def _number(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise MessageError(f"field {name!r} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _integer(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise MessageError(f"field {name!r} must be an integer, got {value!r}")
-    return value
-
-
-def _stamp(value: Any, name: str) -> float | None:
-    return None if value is None else _number(value, name)
-
-
-def _point(value: Any, name: str) -> Point:
-    if not isinstance(value, list | tuple) or len(value) != 2:
-        raise MessageError(f"field {name!r} must be a point [x, y], got {value!r}")
-    return _number(value[0], name), _number(value[1], name)
-
-
-def _list(value: Any, name: str) -> list[Any]:
-    if not isinstance(value, list | tuple):
-        raise MessageError(f"field {name!r} must be a list, got {type(value).__name__}")
-    return list(value)
-
-
-def _table(value: Any, what: str) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise MessageError(f"{what} is a {type(value).__name__}, not a map")
-    return value
 
 
 @dataclass(frozen=True)
@@ -148,28 +127,23 @@ class WallRecord:
     @classmethod
     def from_map(cls, m: Any) -> WallRecord:
         """A received record, checked; MessageError names the field that is wrong."""
-        m = _table(m, "a wall record")
-        try:
-            p0, p1 = _point(m["p0"], "p0"), _point(m["p1"], "p1")
-            record = cls(
-                id=_integer(m["id"], "id"),
-                u=_number(m["u"], "u"),
-                v=_number(m["v"], "v"),
-                cov=_matrix2(m["cov"]),
-                p0=p0,
-                p1=p1,
-                segments=_segments(_with_default(m.get("segments"), [[p0, p1]])),
-                n_obs=_integer(m["n_obs"], "n_obs"),
-                n_views=_integer(m.get("n_views", 0), "n_views"),
-                tentative=m.get("tentative", False),
-                first_seen=_stamp(m.get("first_seen"), "first_seen"),
-                last_seen=_stamp(m.get("last_seen"), "last_seen"),
-                sources=tuple(_source(x) for x in _list(m.get("sources", []), "sources")),
-            )
-        except KeyError as err:
-            raise MessageError(f"wall record lacks {err}") from None
-        if not isinstance(record.tentative, bool):
-            raise MessageError("field 'tentative' must be true or false")
+        m = table(m, "walls")
+        p0, p1 = point(required(m, "p0"), "p0"), point(required(m, "p1"), "p1")
+        record = cls(
+            id=integer(required(m, "id"), "id"),
+            u=number(required(m, "u"), "u"),
+            v=number(required(m, "v"), "v"),
+            cov=matrix2(required(m, "cov"), "cov"),
+            p0=p0,
+            p1=p1,
+            segments=_segments(_with_default(m.get("segments"), [[p0, p1]])),
+            n_obs=integer(required(m, "n_obs"), "n_obs"),
+            n_views=integer(m.get("n_views", 0), "n_views"),
+            tentative=flag(m.get("tentative", False), "tentative"),
+            first_seen=optional_number(m.get("first_seen"), "first_seen"),
+            last_seen=optional_number(m.get("last_seen"), "last_seen"),
+            sources=tuple(_source(x) for x in listed(m.get("sources", []), "sources")),
+        )
         ends = [record.p0, record.p1, *(end for segment in record.segments for end in segment)]
         check_coordinates([(record.u, record.v), *ends], "a wall")
         return record
@@ -177,11 +151,11 @@ class WallRecord:
 
 def _source(value: Any) -> tuple[str, int]:
     """A fleet wall's source: ``{"robot": prefix, "id": its wall id there}``."""
-    table = _table(value, "a wall's source")
-    robot = table.get("robot")
-    if not isinstance(robot, str) or not robot:
-        raise MessageError(f"field 'sources' holds {value!r}, not a robot and an id")
-    return robot, _integer(table.get("id"), "sources")
+    source = table(value, "sources")
+    robot = string(required(source, "robot", "sources.robot"), "sources.robot")
+    if not robot:
+        raise refusal("sources.robot", "a robot's prefix, not empty", robot)
+    return robot, integer(required(source, "id", "sources.id"), "sources.id")
 
 
 def _with_default(value: Any, default: Any) -> Any:
@@ -189,20 +163,12 @@ def _with_default(value: Any, default: Any) -> Any:
     return default if value is None or (isinstance(value, list) and not value) else value
 
 
-def _matrix2(value: Any) -> tuple[Point, Point]:
-    rows = _list(value, "cov")
-    if len(rows) != 2:
-        raise MessageError(f"field 'cov' must be a 2x2 matrix, got {value!r}")
-    return _point(rows[0], "cov"), _point(rows[1], "cov")
-
-
 def _segments(value: Any) -> tuple[Segment, ...]:
+    """The stretches between doors: pairs of points."""
     segments = []
-    for pair in _list(value, "segments"):
-        ends = _list(pair, "segments")
-        if len(ends) != 2:
-            raise MessageError(f"field 'segments' holds {pair!r}, not a pair of points")
-        segments.append((_point(ends[0], "segments"), _point(ends[1], "segments")))
+    for pair in listed(value, "segments"):
+        a, b = listed(pair, "segments", 2, "points [[x, y], [x, y]]")
+        segments.append((point(a, "segments"), point(b, "segments")))
     return tuple(segments)
 
 
@@ -249,37 +215,32 @@ class MapReply:
     @classmethod
     def from_map(cls, m: Any) -> MapReply:
         """A received reply, checked; MessageError says what is wrong."""
-        m = _table(m, "the map reply")
-        try:
-            trajectory = m.get("trajectory")
-            return cls(
-                frame=str(m.get("frame", "map")),
-                frames=_integer(m["frames"], "frames"),
-                observations=_integer(m["observations"], "observations"),
-                stamp=_stamp(m.get("stamp"), "stamp"),
-                walls=tuple(WallRecord.from_map(w) for w in _list(m["walls"], "walls")),
-                merges=tuple(_merge(x) for x in _list(m.get("merges", []), "merges")),
-                trajectory=None
-                if trajectory is None
-                else tuple(_keyframe(p) for p in _list(trajectory, "trajectory")),
-                counters={k: m[k] for k in COUNTERS if k in m},
-            )
-        except KeyError as err:
-            raise MessageError(f"the map reply lacks {err}") from None
+        m = table(m)
+        trajectory = m.get("trajectory")
+        return cls(
+            frame=str(m.get("frame", "map")),
+            frames=integer(required(m, "frames"), "frames"),
+            observations=integer(required(m, "observations"), "observations"),
+            stamp=optional_number(m.get("stamp"), "stamp"),
+            walls=tuple(WallRecord.from_map(w) for w in listed(required(m, "walls"), "walls")),
+            merges=tuple(_merge(x) for x in listed(m.get("merges", []), "merges")),
+            trajectory=None
+            if trajectory is None
+            else tuple(_keyframe(p) for p in listed(trajectory, "trajectory")),
+            counters={k: m[k] for k in COUNTERS if k in m},
+        )
 
 
 def _merge(value: Any) -> tuple[int, int, float]:
-    row = _list(value, "merges")
-    if len(row) != 3:
-        raise MessageError(f"field 'merges' holds {value!r}, not [merged, surviving, stamp]")
-    return _integer(row[0], "merges"), _integer(row[1], "merges"), _number(row[2], "merges")
+    """Walls found to be one: ``[merged id, surviving id, stamp]``."""
+    merged, surviving, stamp = listed(value, "merges", 3, "[merged, surviving, stamp]")
+    return integer(merged, "merges"), integer(surviving, "merges"), number(stamp, "merges")
 
 
 def _keyframe(value: Any) -> tuple[float, float, float, float]:
-    row = _list(value, "trajectory")
-    if len(row) != 4:
-        raise MessageError(f"field 'trajectory' holds {value!r}, not [stamp, x, y, yaw]")
-    stamp, x, y, yaw = (_number(v, "trajectory") for v in row)
+    """A pose of the trajectory: ``[stamp, x, y, yaw]``."""
+    row = listed(value, "trajectory", 4, "[stamp, x, y, yaw]")
+    stamp, x, y, yaw = (number(v, "trajectory") for v in row)
     return stamp, x, y, yaw
 
 
@@ -311,18 +272,13 @@ class MapUpdate:
     @classmethod
     def from_map(cls, m: Any) -> MapUpdate:
         """A received update, checked; MessageError says what is wrong."""
-        m = _table(m, "a map update")
-        try:
-            return cls(
-                frames=_integer(m["frames"], "frames"),
-                stamp=_stamp(m.get("stamp"), "stamp"),
-                walls=tuple(WallRecord.from_map(w) for w in _list(m.get("walls", []), "walls")),
-                removed=tuple(
-                    _integer(i, "removed") for i in _list(m.get("removed", []), "removed")
-                ),
-            )
-        except KeyError as err:
-            raise MessageError(f"the map update lacks {err}") from None
+        m = table(m)
+        return cls(
+            frames=integer(required(m, "frames"), "frames"),
+            stamp=optional_number(m.get("stamp"), "stamp"),
+            walls=tuple(WallRecord.from_map(w) for w in listed(m.get("walls", []), "walls")),
+            removed=tuple(integer(i, "removed") for i in listed(m.get("removed", []), "removed")),
+        )
 
 
 def as_records(walls: Iterable[WallRecord | Mapping[str, Any]]) -> list[WallRecord]:

@@ -10,107 +10,58 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common import se2
 from wallmap.common.codec import MessageError, check_coordinates, decode, encode
+from wallmap.common.fields import (
+    array,
+    count,
+    flag,
+    integer,
+    listed,
+    number,
+    point,
+    refusal,
+    required,
+    string,
+    table,
+)
 from wallmap.common.pose3d import pose_matrix, rpy_from_quaternion
+
+if TYPE_CHECKING:  # the fit's module loads the compiled kernels: not for every message reader
+    from wallmap.common.line_fit import LineFit
 
 Array = NDArray[np.float64]
 
 
-def _get(m: dict[str, Any], key: str) -> Any:
-    if key not in m:
-        msg = f"missing field {key!r}"
-        raise MessageError(msg)
-    return m[key]
-
-
-def _finite(m: dict[str, Any], key: str) -> float:
-    value = _get(m, key)
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        msg = f"field {key!r} must be a number, got {type(value).__name__}"
-        raise MessageError(msg)
-    if not math.isfinite(value):
-        msg = f"field {key!r} is not finite ({value})"
-        raise MessageError(msg)
-    return float(value)
-
-
-def _int(m: dict[str, Any], key: str) -> int:
-    value = _get(m, key)
-    if isinstance(value, bool) or not isinstance(value, int):
-        msg = f"field {key!r} must be an integer"
-        raise MessageError(msg)
-    return value
-
-
-def _count(m: dict[str, Any], key: str) -> int:
-    value = _int(m, key)
-    if value < 0:
-        msg = f"field {key!r} must not be negative"
-        raise MessageError(msg)
-    return value
-
-
-def _str(m: dict[str, Any], key: str, default: str | None = None) -> str:
-    value = m.get(key, default)
-    if not isinstance(value, str):
-        msg = f"field {key!r} must be a string"
-        raise MessageError(msg)
-    return value
-
-
-def _matrix(value: Any, shape: tuple[int, ...], key: str) -> Array:
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        msg = f"field {key!r} must be a numeric array of shape {shape}"
-        raise MessageError(msg) from err
-    if arr.shape != shape:
-        msg = f"field {key!r} has shape {arr.shape}, expected {shape}"
-        raise MessageError(msg)
-    if not np.isfinite(arr).all():
-        msg = f"field {key!r} holds non-finite numbers"
-        raise MessageError(msg)
-    return arr
-
-
 def _covariance(value: Any, n: int, key: str) -> Array:
-    cov = _matrix(value, (n, n), key)
+    """A covariance: symmetric (to rounding) and positive semi-definite."""
+    cov = array(value, (n, n), key)
     size = np.abs(cov)
     # np.allclose(cov, cov.T, atol=1e-12 + 1e-9 * max |cov|) without its cost (a tenth of a
     # frame's decoding): |cov - cov.T| is symmetric, so bounding it by |cov| bounds it by |cov.T|.
     if not (np.abs(cov - cov.T) <= 1e-12 + 1e-9 * size.max() + 1e-5 * size).all():
-        msg = f"field {key!r} is not symmetric"
-        raise MessageError(msg)
+        raise refusal(key, "symmetric", value)
     if n == 2:  # a wall's: the smaller eigenvalue in closed form, eigvalsh's cost spared
         (a, _), (c, d) = cov.tolist()
         least = 0.5 * (a + d) - math.hypot(0.5 * (a - d), c)
     else:
         least = float(np.linalg.eigvalsh(cov).min())
     if least < -1e-12:
-        msg = f"field {key!r} is not positive semi-definite"
-        raise MessageError(msg)
+        raise refusal(key, "positive semi-definite", value)
     return cov
 
 
 def _sensor(m: dict[str, Any]) -> str:
-    value = _str(m, "sensor", "depth")
+    """Whose noise the points carry; older senders had only depth cameras."""
+    value = string(m.get("sensor", "depth"), "sensor")
     if value not in ("depth", "scan"):
-        msg = f"field 'sensor' must be depth or scan, got {value!r}"
-        raise MessageError(msg)
+        raise refusal("sensor", "'depth' or 'scan'", value)
     return value
-
-
-def _require_map(m: object) -> dict[str, Any]:
-    if not isinstance(m, dict):
-        msg = f"expected a map, got {type(m).__name__}"
-        raise MessageError(msg)
-    return m
 
 
 @dataclass(frozen=True, eq=False)  # array fields make generated equality ambiguous
@@ -188,49 +139,34 @@ class Pose:
         A quaternion ``q`` ([qx, qy, qz, qw]) defines roll, pitch and yaw; without it ``yaw`` is
         required and ``roll``, ``pitch`` (and ``z``) default to 0.
         """
-        m = _require_map(m)
+        m = table(m)
         cov = m.get("cov")
         if "q" in m:
             roll, pitch, yaw = rpy_from_quaternion(_quaternion(m["q"]))
         else:
-            yaw = _finite(m, "yaw")
-            roll, pitch = _optional(m, "roll"), _optional(m, "pitch")
+            yaw = number(required(m, "yaw"), "yaw")
+            roll, pitch = number(m.get("roll", 0.0), "roll"), number(m.get("pitch", 0.0), "pitch")
         return cls(
-            stamp=_finite(m, "stamp"),
-            x=_finite(m, "x"),
-            y=_finite(m, "y"),
+            stamp=number(required(m, "stamp"), "stamp"),
+            x=number(required(m, "x"), "x"),
+            y=number(required(m, "y"), "y"),
             yaw=yaw,
             cov=None if cov is None else _covariance(cov, 3, "cov"),
-            frame=_str(m, "frame", "map"),
-            child=_str(m, "child", "base_link"),
-            z=_optional(m, "z"),
+            frame=string(m.get("frame", "map"), "frame"),
+            child=string(m.get("child", "base_link"), "child"),
+            z=number(m.get("z", 0.0), "z"),
             roll=roll,
             pitch=pitch,
         )
 
 
-def _optional(m: dict[str, Any], key: str) -> float:
-    """An optional finite number, 0 when absent."""
-    return _finite(m, key) if key in m else 0.0
-
-
 def _quaternion(value: Any) -> tuple[float, float, float, float]:
-    q = _matrix(value, (4,), "q")
+    q = array(value, (4,), "q")
     norm = float(np.linalg.norm(q))
     if not 0.9 < norm < 1.1:
-        msg = f"field 'q' must be a unit quaternion [qx, qy, qz, qw], its norm is {norm:.3g}"
-        raise MessageError(msg)
+        raise refusal("q", "a unit quaternion [qx, qy, qz, qw]", value)
     qx, qy, qz, qw = (float(v) / norm for v in q)
     return qx, qy, qz, qw
-
-
-def _flag(m: dict[str, Any], name: str) -> bool:
-    """An optional boolean field, false when absent (older senders)."""
-    value = m.get(name, False)
-    if not isinstance(value, bool):
-        msg = f"field {name!r} must be true or false, got {value!r}"
-        raise MessageError(msg)
-    return value
 
 
 @dataclass(frozen=True)
@@ -275,23 +211,25 @@ class Frame:
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> Frame:
         """Validate and build; raises MessageError."""
-        m = _require_map(m)
-        points = _get(m, "points")
-        if not isinstance(points, np.ndarray) or points.dtype != np.float32:
-            msg = "field 'points' must be a float32 array"
-            raise MessageError(msg)
-        if points.ndim != 3 or points.shape[2] != 3 or points.shape[0] * points.shape[1] == 0:
-            msg = f"field 'points' must have shape (rows, columns, 3), got {points.shape}"
-            raise MessageError(msg)
+        m = table(m)
+        points = required(m, "points")
+        if (
+            not isinstance(points, np.ndarray)
+            or points.dtype != np.float32
+            or points.ndim != 3
+            or points.shape[2] != 3
+            or points.shape[0] * points.shape[1] == 0
+        ):
+            raise refusal("points", "a float32 array of shape (rows, columns, 3)", points)
         return cls(
-            run=_str(m, "run"),
-            seq=_count(m, "seq"),
-            stamp=_finite(m, "stamp"),
-            frame_id=_str(m, "frame_id"),
+            run=string(required(m, "run"), "run"),
+            seq=count(required(m, "seq"), "seq"),
+            stamp=number(required(m, "stamp"), "stamp"),
+            frame_id=string(required(m, "frame_id"), "frame_id"),
             points=points,
-            T_base_sensor=_matrix(_get(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
+            T_base_sensor=array(required(m, "base_from_sensor"), (4, 4), "base_from_sensor"),
             sensor=_sensor(m),
-            lossless=_flag(m, "lossless"),
+            lossless=flag(m.get("lossless", False), "lossless"),
             band=_band(m),
             sweep=_sweep(m),
         )
@@ -301,20 +239,18 @@ def _sweep(m: dict[str, Any]) -> float:
     """The optional ``sweep``: seconds the frame's capture spans, not deskewed (0: an instant)."""
     if m.get("sweep") is None:
         return 0.0
-    sweep = _finite(m, "sweep")
+    sweep = number(m["sweep"], "sweep")
     if not 0.0 <= sweep <= 10.0:
-        msg = f"field 'sweep' must be 0-10 s, got {sweep}"
-        raise MessageError(msg)
+        raise refusal("sweep", "0-10 s", sweep)
     return sweep
 
 
 def _band(m: dict[str, Any]) -> tuple[float, float] | None:
     if m.get("band") is None:
         return None
-    band = _matrix(m["band"], (2,), "band")
+    band = array(m["band"], (2,), "band")
     if not band[0] < band[1]:
-        msg = f"field 'band' must be [low, high] with low below high, got {band.tolist()}"
-        raise MessageError(msg)
+        raise refusal("band", "[low, high] with low below high", m["band"])
     return float(band[0]), float(band[1])
 
 
@@ -345,28 +281,44 @@ class WallObservation:
         }
 
     @classmethod
+    def from_fit(cls, fit: LineFit) -> WallObservation:
+        """The wall a line fit found, as the detector reports it.
+
+        One place that says which of the fit's results travel (the line, its covariance, the
+        extent, the support); the rest (normal, offset, noise estimates) stays with the detector.
+        The arrays are the fit's own, not copies: both are frozen, and they are packed as they are.
+        """
+        return cls(
+            closest=fit.closest,
+            cov=fit.cov,
+            p0=fit.p0,
+            p1=fit.p1,
+            n_points=fit.n_points,
+            rms=fit.rms,
+        )
+
+    @classmethod
     def from_map(cls, m: dict[str, Any]) -> WallObservation:
         """Validate and build; raises MessageError."""
-        m = _require_map(m)
-        u, v = _finite(m, "u"), _finite(m, "v")
+        m = table(m, "walls")
+        u, v = number(required(m, "u"), "u"), number(required(m, "v"), "v")
         check_coordinates((u, v), "the wall's closest point (u, v)")
         if math.hypot(u, v) < 1e-3:
             msg = "wall passes through the sensor (u = v = 0)"
             raise MessageError(msg)
-        cov = _covariance(_get(m, "cov"), 2, "cov")
+        cov = _covariance(required(m, "cov"), 2, "cov")
         (a, b), (c, d) = cov.tolist()
         if a * d - b * c <= 0.0:
-            msg = "field 'cov' is singular"
-            raise MessageError(msg)
-        p0, p1 = _matrix(_get(m, "p0"), (2,), "p0"), _matrix(_get(m, "p1"), (2,), "p1")
-        check_coordinates((*p0.tolist(), *p1.tolist()), "a segment end (p0, p1)")
+            raise refusal("cov", "non-singular", m["cov"])
+        p0, p1 = point(required(m, "p0"), "p0"), point(required(m, "p1"), "p1")
+        check_coordinates((*p0, *p1), "a segment end (p0, p1)")
         return cls(
             closest=np.array([u, v]),
             cov=cov,
-            p0=p0,
-            p1=p1,
-            n_points=_int(m, "n_points"),
-            rms=_finite(m, "rms"),
+            p0=np.array(p0),
+            p1=np.array(p1),
+            n_points=integer(required(m, "n_points"), "n_points"),
+            rms=number(required(m, "rms"), "rms"),
         )
 
 
@@ -416,23 +368,20 @@ class Observations:
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> Observations:
         """Validate and build; raises MessageError."""
-        m = _require_map(m)
-        walls = _get(m, "walls")
-        if not isinstance(walls, list):
-            msg = "field 'walls' must be a list"
-            raise MessageError(msg)
+        m = table(m)
+        walls = listed(required(m, "walls"), "walls")
         origin, rays = _free(m)
         return cls(
-            run=_str(m, "run"),
-            seq=_count(m, "seq"),
-            stamp=_finite(m, "stamp"),
-            frame=_str(m, "frame", "base_link"),
+            run=string(required(m, "run"), "run"),
+            seq=count(required(m, "seq"), "seq"),
+            stamp=number(required(m, "stamp"), "stamp"),
+            frame=string(m.get("frame", "base_link"), "frame"),
             walls=[WallObservation.from_map(w) for w in walls],
-            lossless=_flag(m, "lossless"),
+            lossless=flag(m.get("lossless", False), "lossless"),
             ray_origin=origin,
             rays=rays,
             sensor=_sensor(m),
-            skipped=_flag(m, "skipped"),
+            skipped=flag(m.get("skipped", False), "skipped"),
             sweep=_sweep(m),
         )
 
@@ -445,13 +394,12 @@ def _free(m: dict[str, Any]) -> tuple[Array | None, Array | None]:
     free = m.get("free")
     if free is None:
         return None, None
-    free = _require_map(free)
-    ends = _get(free, "ends")
+    free = table(free, "free")
+    ends = required(free, "ends", "free.ends")
     if not isinstance(ends, list) or len(ends) > MAX_RAYS:
-        msg = f"field 'free.ends' must be a list of at most {MAX_RAYS} points"
-        raise MessageError(msg)
-    origin = _matrix(_get(free, "origin"), (2,), "free.origin")
-    return origin, _matrix(ends, (len(ends), 2), "free.ends") if ends else np.zeros((0, 2))
+        raise refusal("free.ends", f"a list of at most {MAX_RAYS} points", ends)
+    origin = array(required(free, "origin", "free.origin"), (2,), "free.origin")
+    return origin, array(ends, (len(ends), 2), "free.ends") if ends else np.zeros((0, 2))
 
 
 @dataclass(frozen=True)
@@ -481,13 +429,13 @@ class Progress:
     @classmethod
     def from_map(cls, m: dict[str, Any]) -> Progress:
         """Validate and build; raises MessageError."""
-        m = _require_map(m)
+        m = table(m)
         return cls(
-            run=_str(m, "run"),
-            processed=_int(m, "processed"),
-            integrated=_int(m, "integrated"),
-            dropped=_int(m, "dropped"),
-            epoch=_str(m, "epoch", ""),
+            run=string(required(m, "run"), "run"),
+            processed=integer(required(m, "processed"), "processed"),
+            integrated=integer(required(m, "integrated"), "integrated"),
+            dropped=integer(required(m, "dropped"), "dropped"),
+            epoch=string(m.get("epoch", ""), "epoch"),
         )
 
 

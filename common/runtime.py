@@ -32,6 +32,9 @@ def setup_logging(service: str) -> logging.Logger:
     return logging.getLogger(f"wallmap.{service}")
 
 
+MAX_KINDS = 1024  # log kinds remembered for the once-a-second limit, beyond the last second
+
+
 class Stats:
     """Thread-safe counters, with refusals logged by reason (at most once a second per reason)."""
 
@@ -59,6 +62,10 @@ class Stats:
             quiet = now - self._last_logged.get(kind, -1e9) < 1.0
             if not quiet:
                 self._last_logged[kind] = now
+                if len(self._last_logged) > MAX_KINDS:  # reasons quote what came: keep it bounded
+                    self._last_logged = {
+                        k: t for k, t in self._last_logged.items() if now - t < 1.0
+                    }
         if not quiet:
             self._log.warning("%s", message)
 

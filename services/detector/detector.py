@@ -10,7 +10,7 @@ import numpy as np
 
 from wallmap.common.line_fit import LineFit
 from wallmap.common.messages import Frame, Observations, WallObservation
-from wallmap.common.ransac import RansacParams, RowReport, detect_lines
+from wallmap.common.ransac import RansacConfig, RowReport, detect_lines
 from wallmap.common.scan_row import (
     RowSelection,
     frame_stack,
@@ -21,7 +21,7 @@ from wallmap.common.scan_row import (
 )
 
 # A 2-D lidar: ~1 cm noise, constant with range; single dropped returns do not split a wall.
-SCANNER = RansacParams(noise_k=0.0, sigma_floor=0.01, inlier_min=0.03, nan_run=4, max_jump=0.3)
+SCANNER = RansacConfig(noise_k=0.0, sigma_floor=0.01, inlier_min=0.03, nan_run=4, max_jump=0.3)
 
 
 @dataclass(frozen=True)
@@ -40,8 +40,8 @@ class DetectorConfig:
     """
 
     rows: RowSelection = field(default_factory=RowSelection)
-    ransac: RansacParams = field(default_factory=RansacParams)
-    scan_ransac: RansacParams = SCANNER
+    ransac: RansacConfig = field(default_factory=RansacConfig)
+    scan_ransac: RansacConfig = SCANNER
     min_distance: float = 0.1
     seed: int = 0
 
@@ -108,14 +108,7 @@ class WallDetector:
             if near:
                 report.rejected["closer than min_distance"] += near
         walls = [
-            WallObservation(
-                closest=line.closest,
-                cov=line.cov,
-                p0=line.p0,
-                p1=line.p1,
-                n_points=line.n_points,
-                rms=line.rms,
-            )
+            WallObservation.from_fit(line)
             for line in lines
             if line.offset >= self.config.min_distance
         ]

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from wallmap.common import codec
 from wallmap.common.codec import MessageError
+from wallmap.common.line_fit import fit_line
 from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import (
     Frame,
@@ -86,10 +87,19 @@ def test_walls_beyond_any_building_are_refused_without_overflowing() -> None:
         (msgpack.packb([1, 2]), "not a map"),
         (msgpack.packb({"stamp": 1.0}), "schema version None"),
         (msgpack.packb({"v": 2, "stamp": 1.0}), "schema version 2"),
-        (codec.encode({"stamp": 1.0, "x": 0.0, "y": 0.0}), "missing field 'yaw'"),
-        (codec.encode({"stamp": 1.0, "x": math.nan, "y": 0.0, "yaw": 0.0}), "'x' is not finite"),
-        (codec.encode({"stamp": 1.0, "x": math.inf, "y": 0.0, "yaw": 0.0}), "'x' is not finite"),
-        (codec.encode({"stamp": "now", "x": 0.0, "y": 0.0, "yaw": 0.0}), "must be a number"),
+        (codec.encode({"stamp": 1.0, "x": 0.0, "y": 0.0}), "field 'yaw' is missing"),
+        (
+            codec.encode({"stamp": 1.0, "x": math.nan, "y": 0.0, "yaw": 0.0}),
+            "field 'x' must be a finite number, got nan",
+        ),
+        (
+            codec.encode({"stamp": 1.0, "x": math.inf, "y": 0.0, "yaw": 0.0}),
+            "field 'x' must be a finite number, got inf",
+        ),
+        (
+            codec.encode({"stamp": "now", "x": 0.0, "y": 0.0, "yaw": 0.0}),
+            "field 'stamp' must be a finite number, got 'now'",
+        ),
         (
             codec.encode({"stamp": 1.0, "x": 0.0, "y": 0.0, "yaw": 0.0, "cov": [[1, 0], [0, 1]]}),
             "shape",
@@ -110,10 +120,10 @@ def test_bad_poses_are_refused_with_their_reason(payload, reason):
 @pytest.mark.parametrize(
     ("cov", "reason"),
     [
-        ([[1e-4, 2e-6], [1e-6, 1e-4]], "not symmetric"),
+        ([[1e-4, 2e-6], [1e-6, 1e-4]], "must be symmetric"),
         ([[1e-4, 2e-4], [2e-4, 1e-4]], "positive semi-definite"),
-        ([[1e-4, 1e-4], [1e-4, 1e-4]], "singular"),
-        ([[0.0, 0.0], [0.0, 0.0]], "singular"),
+        ([[1e-4, 1e-4], [1e-4, 1e-4]], "must be non-singular"),
+        ([[0.0, 0.0], [0.0, 0.0]], "must be non-singular"),
         ([[1e-4, 1e-6], [1e-6 * (1 + 1e-7), 2e-4]], None),  # symmetric to rounding
     ],
 )
@@ -133,8 +143,8 @@ def test_bad_frames_are_refused_with_their_reason():
         "float32 array": {**good, "points": np.zeros((2, 2, 3), np.float64)},
         "shape": {**good, "points": np.zeros((2, 2, 2), np.float32)},
         "base_from_sensor": {**good, "base_from_sensor": np.eye(3)},
-        "'seq' must be an integer": {**good, "seq": 1.5},
-        "'seq' must not be negative": {**good, "seq": -1},
+        "'seq' must be a non-negative integer, got 1.5": {**good, "seq": 1.5},
+        "'seq' must be a non-negative integer, got -1": {**good, "seq": -1},
     }
     for reason, m in cases.items():
         with pytest.raises(MessageError, match=reason):
@@ -193,3 +203,17 @@ def test_a_fleet_walls_sources_go_and_come_back_and_bad_ones_are_refused() -> No
     for bad in ([{"robot": "", "id": 1}], [{"robot": "a", "id": "x"}], ["a"], {"robot": "a"}):
         with pytest.raises(MessageError):
             WallRecord.from_map({**body, "sources": bad})
+
+
+def test_a_line_fit_becomes_the_wall_the_detector_reports() -> None:
+    """``from_fit`` carries the fit's line, covariance, extent and support, nothing else."""
+    xs = np.linspace(-1.0, 1.0, 40)
+    fit = fit_line(np.stack([xs, 2.0 + 0.01 * np.sin(7 * xs)], axis=1))
+    wall = WallObservation.from_fit(fit)
+    by_hand = WallObservation(fit.closest, fit.cov, fit.p0, fit.p1, fit.n_points, fit.rms)
+    assert pack(Observations("r", 1, 2.0, "base_link", [wall])) == pack(
+        Observations("r", 1, 2.0, "base_link", [by_hand])
+    )
+    back = unpack_observations(pack(Observations("r", 1, 2.0, "base_link", [wall]))).walls[0]
+    np.testing.assert_array_equal(back.closest, fit.closest)
+    assert (back.n_points, back.rms) == (fit.n_points, fit.rms)

@@ -91,5 +91,5 @@ def test_the_contract_pose_carries_6dof_fields_or_a_quaternion() -> None:
     assert (got.roll, got.pitch, got.yaw, got.z) == pytest.approx((0.2, -0.1, 2.0, 0.5))
     with pytest.raises(MessageError, match="unit quaternion"):
         unpack_pose(encode({**message, "q": [0.0, 0.0, 0.0, 3.0]}))
-    with pytest.raises(MessageError, match="'roll' is not finite"):
+    with pytest.raises(MessageError, match="field 'roll' must be a finite number, got nan"):
         unpack_pose(encode({"v": 1, "stamp": 1.0, "x": 0, "y": 0, "yaw": 0, "roll": math.nan}))

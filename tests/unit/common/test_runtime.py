@@ -1,0 +1,40 @@
+"""A service's counters: every refusal counted, logged at most once a second per reason."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from wallmap.common import runtime
+from wallmap.common.runtime import Stats
+
+
+def test_refusals_are_all_counted_and_each_reason_logged_once_a_second(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    stats = Stats(logging.getLogger("test_runtime"))
+    with caplog.at_level(logging.WARNING, logger="test_runtime"):
+        for _ in range(5):
+            stats.refuse("frame", "field 'stamp' must be a finite number, got 'abc'")
+        stats.refuse("frame", "field 'seq' is missing")
+    assert stats.snapshot()["refused"] == 6
+    assert stats.snapshot()["refused.frame"] == 6
+    assert [r.getMessage() for r in caplog.records] == [
+        "refused frame: field 'stamp' must be a finite number, got 'abc'",
+        "refused frame: field 'seq' is missing",
+    ]
+
+
+def test_reasons_that_quote_what_came_do_not_grow_the_log_limit_without_bound(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A sender of ever different bad values: the reasons differ, the memory does not grow."""
+    monkeypatch.setattr(runtime, "MAX_KINDS", 50)
+    clock = iter(float(t) for t in range(10_000))
+    monkeypatch.setattr(runtime.time, "monotonic", lambda: next(clock))
+    stats = Stats(logging.getLogger("test_runtime"))
+    for value in range(1_000):
+        stats.refuse("frame", f"field 'stamp' must be a finite number, got {value}")
+    assert stats.snapshot()["refused"] == 1_000
+    assert len(stats._last_logged) <= 51
