@@ -17,7 +17,7 @@ import time
 import numpy as np
 from sklearn.linear_model import RANSACRegressor
 
-from wallmap.common.ransac import RansacParams, detect_lines, split_at_nans
+from wallmap.common.ransac import RansacConfig, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
 from wallmap.scene import (
     Camera,
@@ -42,7 +42,7 @@ def scene_rows(frames: int) -> list[np.ndarray]:
     return rows
 
 
-def sklearn_lines(scan: np.ndarray, params: RansacParams) -> int:
+def sklearn_lines(scan: np.ndarray, params: RansacConfig) -> int:
     """The paper's sequential scheme with scikit-learn's RANSAC; returns the lines found."""
     found = 0
     for cluster in split_at_nans(scan):
@@ -75,7 +75,7 @@ def main() -> None:
     parser.add_argument("--passes", type=int, default=3)
     args = parser.parse_args()
     rows = scene_rows(args.frames)
-    params = RansacParams()
+    params = RansacConfig()
     rng = np.random.default_rng(0)
     ours, theirs, lines_ours, lines_theirs = [], [], [], []
     for _ in range(args.passes):  # alternating passes over all rows: a busy spell hits both

@@ -31,10 +31,10 @@ from wallmap.plot import write_picture
 from wallmap.recordings import RGBD, tum_as_bag
 from wallmap.services.mapper import serving
 from wallmap.services.player.settings import PlayerSettings
-from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.sources import SourceSettings
 
 
-def row(name: str, way: str, recording: Path, options: SourceOptions, out: Path | None) -> None:
+def row(name: str, way: str, recording: Path, options: SourceSettings, out: Path | None) -> None:
     config = Config(player=PlayerSettings(source=options))
     start = time.perf_counter()
     wall_map = map_bag(recording, config)
@@ -67,12 +67,12 @@ def main() -> None:
         if not folder.is_dir():
             print(f"{name}: {folder} is absent")
             continue
-        options = SourceOptions(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale)
+        options = SourceSettings(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale)
         row(name, "tum-folder", folder, options, args.out)
         with tempfile.TemporaryDirectory() as tmp:
             for way in ("tf-6dof", "planar-base"):
                 bag = tum_as_bag(folder, Path(tmp) / f"{way}.bag", camera, way=way)
-                row(name, way, bag, SourceOptions(), args.out)
+                row(name, way, bag, SourceSettings(), args.out)
 
 
 if __name__ == "__main__":

@@ -3,8 +3,8 @@
 Both ends of the protocol, in the order a frame travels:
 
 1. **Publishing with a window.** Every live stream (the player's frames and poses, the
-   detector's observations) is published with a cache of its last ``History.seconds`` (Zenoh's
-   advanced publishers, with heartbeats, so even the last samples before a quiet spell are
+   detector's observations) is published with a cache of its last ``HistorySettings.seconds``
+   (Zenoh's advanced publishers, with heartbeats, so even the last samples before a quiet spell are
    recovered). A live sensor does not replay: the window is what a service that restarts, or a
    link that comes back, can still get.
 2. **Subscribing with history.** Each service's subscriber asks for the window when it starts
@@ -40,7 +40,7 @@ import zenoh
 from zenoh import ext
 
 from wallmap.common.codec import MessageError
-from wallmap.common.link_settings import History
+from wallmap.common.link_settings import HistorySettings
 from wallmap.common.messages import (
     Frame,
     unpack_frame,
@@ -92,7 +92,7 @@ class CatchUpInbox:
         self._fetched: collections.deque[zenoh.Sample] = collections.deque()
         self._asking = threading.Event()
 
-    def ask(self, session: zenoh.Session, key: str, history: History) -> None:
+    def ask(self, session: zenoh.Session, key: str, history: HistorySettings) -> None:
         """Query every cache of ``key`` for its window; the answer comes in the background."""
         self._asking.set()
         selector = f"{key}/@adv/**?_max={history.samples()};_time=[now(-{history.seconds:g}s)..]"
@@ -149,7 +149,7 @@ class HistorySubscription:
 def subscribe_with_history(
     session: zenoh.Session,
     key: str,
-    history: History,
+    history: HistorySettings,
     drain: Callable[[Any], None],
     on_miss: Callable[[int], None],
 ) -> HistorySubscription:
@@ -228,7 +228,7 @@ class _Once:
 def frames_in_turn(
     channel: zenoh.handlers.Handler[zenoh.Sample],
     stats: Stats,
-    history: History,
+    history: HistorySettings,
     on_skip: Callable[[list[Frame]], None] | None = None,
 ) -> Iterator[Frame]:
     """The frames to process, in arrival order; in real-time playback, skipping when far behind.

@@ -62,7 +62,7 @@ class ZenohSettings:
 
 
 @dataclass(frozen=True)
-class History:
+class HistorySettings:
     """How much of a stream is kept for subscribers that missed it.
 
     Attributes:

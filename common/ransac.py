@@ -62,7 +62,7 @@ _RULES = [
 
 
 @dataclass(frozen=True)
-class RansacParams:
+class RansacConfig:
     """Tuning of the line search.
 
     Attributes:
@@ -118,7 +118,7 @@ class RansacParams:
     nan_run: int = 0
     max_jump: float = math.inf
 
-    def scaled(self, factor: float) -> RansacParams:
+    def scaled(self, factor: float) -> RansacConfig:
         """These, with the per-point noise scaled by ``factor`` (> 0): the noise learnt.
 
         Made for every frame, so not checked again: a positive factor keeps them valid.
@@ -147,7 +147,7 @@ def split_at_nans(
     return [index[a:b] for a, b in itertools.pairwise(starts.tolist())]
 
 
-def point_sigmas(points: Array, params: RansacParams) -> Array:
+def point_sigmas(points: Array, params: RansacConfig) -> Array:
     """Per-point noise: a depth camera's grows with the square of the range."""
     range2 = np.einsum("ij,ij->i", points, points)
     return params.noise_scale * np.maximum(params.sigma_floor, params.noise_k * range2)
@@ -174,7 +174,7 @@ def _inliers(
 
 
 def _segments(
-    fit: LineFit, points: Array, sigmas: Array, params: RansacParams
+    fit: LineFit, points: Array, sigmas: Array, params: RansacConfig
 ) -> list[NDArray[np.intp]]:
     """Cut the points of one line at gaps along it and at kinks; each piece ordered along it."""
     along = points @ np.array([-fit.normal[1], fit.normal[0]])
@@ -213,7 +213,7 @@ class RowReport:
 
 def find_lines(
     points: Array,
-    params: RansacParams,
+    params: RansacConfig,
     rng: np.random.Generator,
     report: RowReport | None = None,
 ) -> list[LineFit]:
@@ -256,7 +256,7 @@ def find_lines(
 
 
 def _joined(
-    points: Array, sigmas: Array, pieces: list[NDArray[np.intp]], params: RansacParams
+    points: Array, sigmas: Array, pieces: list[NDArray[np.intp]], params: RansacConfig
 ) -> list[LineFit]:
     """Lines from pairs of unsure pieces that are neighbours along the scan and one wall.
 
@@ -281,14 +281,14 @@ def _joined(
     return out
 
 
-def _angle_sd_limit(fit: LineFit, share: float, params: RansacParams) -> float:
+def _angle_sd_limit(fit: LineFit, share: float, params: RansacConfig) -> float:
     """The least sure direction accepted for a line holding ``share`` of its cluster."""
     if share >= params.lone_share and fit.length >= params.lone_length:
         return max(params.max_angle_sd, params.lone_angle_sd)
     return params.max_angle_sd
 
 
-def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]:
+def meet_at_corners(lines: list[LineFit], params: RansacConfig) -> list[LineFit]:
     """End lines that nearly meet at an angle at their intersection, both of them."""
     lines = list(lines)
     for i, j in itertools.combinations(range(len(lines)), 2):
@@ -316,7 +316,7 @@ def meet_at_corners(lines: list[LineFit], params: RansacParams) -> list[LineFit]
 
 def detect_lines(
     scan: Array,
-    params: RansacParams,
+    params: RansacConfig,
     rng: np.random.Generator,
     report: RowReport | None = None,
 ) -> list[LineFit]:

@@ -1,8 +1,8 @@
 """wallmap's one configuration: a section per service, from a TOML file, ``--set`` and flags.
 
     [zenoh]      where the router is and the key prefix          ZenohSettings
-    [history]    how much of the live streams is kept            History
-    [player]     how a recording is played, and read             PlayerSettings, SourceOptions
+    [history]    how much of the live streams is kept            HistorySettings
+    [player]     how a recording is played, and read             PlayerSettings, SourceSettings
     [detector]   the height band, the line search                DetectorConfig
     [mapper]     association, merging, serving; --slam; state    MapperSettings
     [odometry]   the scan matcher                                OdometryConfig
@@ -29,7 +29,7 @@ from typing import Any
 from wallmap.arg_types import picture_problem
 from wallmap.common import config_file
 from wallmap.common.config_file import Tree, require
-from wallmap.common.link_settings import History, ZenohSettings
+from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.services.detector.detector import DetectorConfig
 from wallmap.services.mapper.settings import MapperSettings
 from wallmap.services.odometry.tracker import OdometryConfig
@@ -103,7 +103,7 @@ class Config:
     """
 
     zenoh: ZenohSettings = field(default_factory=ZenohSettings)
-    history: History = field(default_factory=History)
+    history: HistorySettings = field(default_factory=HistorySettings)
     player: PlayerSettings = field(default_factory=PlayerSettings)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     mapper: MapperSettings = field(default_factory=MapperSettings)

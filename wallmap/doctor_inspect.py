@@ -32,7 +32,7 @@ from wallmap.services.player.bag_contents import BagContents, Stamps, read_conte
 from wallmap.services.player.bag_file import BagFile
 from wallmap.services.player.choices import SensorChoice, SensorRefusal, choose_sensor
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.sources import SourceSettings
 from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
 
 
@@ -123,7 +123,7 @@ def _fill(
     report.clock = [clock_facts(topic, s, t0, bag_start) for topic, s in streams.items()]
 
 
-def inspect_tum(path: Path, source: SourceOptions) -> Report:
+def inspect_tum(path: Path, source: SourceSettings) -> Report:
     """Inspect a TUM RGB-D folder as the player would open it (``source``: its camera, poses)."""
     files = [f for f in path.rglob("*") if f.is_file()]
     report = Report(

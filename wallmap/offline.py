@@ -27,7 +27,7 @@ from wallmap.services.mapper.wall_map import WallMap
 from wallmap.services.pipeline import Pipeline
 from wallmap.services.player.bag_contents import LASERSCAN
 from wallmap.services.player.pose_stream import stream_of
-from wallmap.services.player.sources import SourceOptions, open_source
+from wallmap.services.player.sources import SourceSettings, open_source
 
 Array = NDArray[np.float64]
 
@@ -106,7 +106,7 @@ def scan_rows(bag: Path, rows: RowSelection | None = None) -> Iterator[tuple[flo
     What the detector and the odometry see of a bag, for checking poses and maps against it.
     """
     how = rows or RowSelection()
-    with open_source(bag, SourceOptions(pose_source="none")) as recording:
+    with open_source(bag, SourceSettings(pose_source="none")) as recording:
         for frame, _ in recording.frames(how):
             yield frame.stamp, finite_scan(frame, how)
 
@@ -125,7 +125,7 @@ def walls(wall_map: WallMap, min_obs: int = 1) -> tuple[WallRecord, ...]:
 def points_at_heights(
     path: Path,
     heights: tuple[float, float] = (0.9, 1.6),
-    source: SourceOptions | None = None,
+    source: SourceSettings | None = None,
     every: int = 8,
 ) -> Array:
     """The points a depth recording saw between two heights above the floor, in the map (N x 2).

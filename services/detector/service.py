@@ -24,7 +24,7 @@ from wallmap.common.delivery import (
     frames_in_turn,
     subscribe_with_history,
 )
-from wallmap.common.link_settings import History, ZenohSettings
+from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
@@ -36,14 +36,14 @@ def run(
     settings: ZenohSettings,
     config: DetectorConfig,
     stop: threading.Event,
-    history: History | None = None,
+    history: HistorySettings | None = None,
 ) -> Stats:
     """Run until ``stop`` is set; returns the counters.
 
     ``history``: the window of frames asked for at start and recovered after a loss, and of
     observations kept for a mapper that missed them.
     """
-    history = history or History()
+    history = history or HistorySettings()
     log = setup_logging("detector")
     keep_large_buffers()  # whole clouds are megabytes each
     keys = Keys(settings.prefix)
@@ -93,7 +93,7 @@ def _work(
     publisher: AdvancedPublisher,
     diagnostics: zenoh.Publisher,
     stats: Stats,
-    history: History,
+    history: HistorySettings,
 ) -> None:
     """Detect walls in every frame until the subscriber is undeclared.
 

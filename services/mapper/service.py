@@ -18,7 +18,7 @@ import zenoh
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.delivery import HistorySubscription, subscribe_with_history
 from wallmap.common.frame_order import ACK_EVERY
-from wallmap.common.link_settings import History, ZenohSettings
+from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_requests import answer_map_queries
 from wallmap.common.messages import pack
@@ -45,7 +45,7 @@ def run(
     settings: ZenohSettings,
     mapper: MapperSettings,
     stop: threading.Event,
-    history: History | None = None,
+    history: HistorySettings | None = None,
     config: dict[str, Any] | None = None,
 ) -> Stats:
     """Run until ``stop`` is set, then save the state; returns the counters.
@@ -54,7 +54,7 @@ def run(
     ``config``: the run's whole configuration (plain values), kept in the state file with the
     map, so a map says how it was made.
     """
-    history = history or History()
+    history = history or HistorySettings()
     log = setup_logging("mapper")
     keys = Keys(settings.prefix)
     stats = Stats(log)
@@ -101,7 +101,7 @@ def run(
 def _subscribe(
     session: zenoh.Session,
     keys: tuple[str, str],
-    history: History,
+    history: HistorySettings,
     core: MapperCore,
     mapper: MapperSettings,
     observe: tuple[zenoh.Publisher, float, float, CorrectedPoses | None],

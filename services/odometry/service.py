@@ -18,7 +18,7 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import declare_history_publisher, received_frames
-from wallmap.common.link_settings import History, ZenohSettings
+from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.map_requests import MalformedReplyError, QueryError, fetch_map
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, setup_logging
@@ -35,7 +35,7 @@ def run(
     config: OdometryConfig,
     stop: threading.Event,
     rows: RowSelection | None = None,
-    history: History | None = None,
+    history: HistorySettings | None = None,
 ) -> Stats:
     """Run until ``stop`` is set; returns the counters.
 
@@ -50,12 +50,12 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     tracker = PoseTracker(config)
-    rows = rows or RowSelection()
+    rows, history = rows or RowSelection(), history or HistorySettings()
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
         # Poses with history, for a mapper that restarts; frames without: scan matching goes
         # in order, and a restarted odometry starts afresh.
-        publisher = declare_history_publisher(session, keys.pose, (history or History()).samples())
+        publisher = declare_history_publisher(session, keys.pose, history.samples())
         frames = session.declare_subscriber(keys.frames, zenoh.handlers.FifoChannel(QUEUE_DEPTH))
         # Map updates come at most twice a second; a callback queues them for the worker, which
         # takes them before each frame (a channel read only then could fill and stall the session).

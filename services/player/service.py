@@ -27,7 +27,7 @@ from zenoh.ext import AdvancedPublisher
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
 from wallmap.common.delivery import AckWindow, declare_history_publisher
-from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
+from wallmap.common.link_settings import MAX_RATE, HistorySettings, ZenohSettings
 from wallmap.common.messages import pack
 from wallmap.common.runtime import drain, setup_logging
 from wallmap.common.scan_row import RowSelection
@@ -158,7 +158,7 @@ class _Outlet:
         sensor: str,
         playback: Playback,
         bag: FrameSource,
-        history: History,
+        history: HistorySettings,
         speed: float,
     ) -> None:
         rate = bag.frame_count / bag.duration if bag.duration > 0 else MAX_RATE
@@ -285,13 +285,13 @@ def run(
     recording: Path,
     player: PlayerSettings,
     stop: threading.Event,
-    history: History | None = None,
+    history: HistorySettings | None = None,
 ) -> PlayResult:
     """Play ``recording`` once (or in a loop); raises PlayerError (or TransportError) saying why.
 
     ``history``: the window of frames and poses kept for services that missed them.
     """
-    history = history or History()
+    history = history or HistorySettings()
     log = setup_logging("player")
     keep_large_buffers()  # bag messages are megabytes each
     keys = Keys(settings.prefix)

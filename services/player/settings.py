@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from wallmap.common.config_file import require
-from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.sources import SourceSettings
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class PlayerSettings:
 
     rate: float = 1.0
     fast: bool = False
-    source: SourceOptions = field(default_factory=SourceOptions)
+    source: SourceSettings = field(default_factory=SourceSettings)
     window: int = 16
     wait_for: tuple[str, ...] | None = None
     wait_timeout: float = 30.0

@@ -19,7 +19,7 @@ FrameSource = BagSource | TumFolder
 
 
 @dataclass(frozen=True)
-class SourceOptions:
+class SourceSettings:
     """How to read a recording, whichever kind it is.
 
     Attributes:
@@ -43,9 +43,9 @@ class SourceOptions:
     depth_scale: float | None = None
 
 
-def open_source(path: Path, options: SourceOptions | None = None) -> FrameSource:
+def open_source(path: Path, options: SourceSettings | None = None) -> FrameSource:
     """The recording at ``path``, opened and checked; PlayerError says what is wrong."""
-    how = options or SourceOptions()
+    how = options or SourceSettings()
     if is_tum_folder(Path(path)):
         return TumFolder(
             Path(path),

@@ -25,7 +25,7 @@ from zenoh import ext
 
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import declare_history_publisher
-from wallmap.common.link_settings import MAX_RATE, History, ZenohSettings
+from wallmap.common.link_settings import MAX_RATE, HistorySettings, ZenohSettings
 from wallmap.common.messages import Pose, pack
 from wallmap.common.ros2_types import deserialize_cdr
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
@@ -92,7 +92,10 @@ def _subscribe(session: zenoh.Session, kind: str, key: str, intake: _Intake) -> 
 
 
 def run(
-    settings: ZenohSettings, ros2: Ros2Settings, stop: threading.Event, history: History | None
+    settings: ZenohSettings,
+    ros2: Ros2Settings,
+    stop: threading.Event,
+    history: HistorySettings | None,
 ) -> Stats:
     """Until ``stop`` is set; returns the counters. PlayerError says what is wrong with a flag."""
     log = setup_logging("ros2")
@@ -119,7 +122,7 @@ def run(
         subscribers = [
             _subscribe(session, kind, key, intake) for kind, (key, _) in subscriptions.items()
         ]
-        outlet = _Outlet(session, keys, history or History(), run_id, msgtype)
+        outlet = _Outlet(session, keys, history or HistorySettings(), run_id, msgtype)
         presence = Presence(
             session, keys, "ros2", stats, lambda: {"run": run_id, **watch.report(time.monotonic())}
         )
@@ -215,7 +218,12 @@ class _Outlet:
     """The player's keys: frames and poses, with the history window for services that restart."""
 
     def __init__(
-        self, session: zenoh.Session, keys: Keys, history: History, run_id: str, msgtype: str
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        history: HistorySettings,
+        run_id: str,
+        msgtype: str,
     ) -> None:
         self._session, self._keys, self._history, self._run = session, keys, history, run_id
         self._sensor = "scan" if msgtype == LASERSCAN else "depth"

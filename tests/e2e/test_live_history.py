@@ -124,7 +124,7 @@ def test_the_router_killed_and_restarted_loses_nothing(stack, scene, reference) 
 
 
 def test_a_window_too_short_for_the_outage_counts_what_it_lost(stack, scene) -> None:
-    """History of 1 s, a detector down 3 s: frames are lost, and the map reply says how many."""
+    """A window of 1 s, a detector down 3 s: frames are lost, and the map reply says how many."""
     stack.start("mapper", "mapper", "--history", "1", "--gap-wait", "2", *stack.zenoh_args)
     detector = stack.start("detector", "detector", "--history", "1", *stack.zenoh_args)
     player = stack.start(

@@ -20,7 +20,7 @@ from wallmap.common.map_consistency import MappedWall, distance_to_walls, duplic
 from wallmap.doctor_inspect import inspect_tum
 from wallmap.offline import points_at_heights
 from wallmap.recordings import RGBD, DepthCamera, tum_as_bag
-from wallmap.services.player.sources import SourceOptions
+from wallmap.services.player.sources import SourceSettings
 
 pytestmark = pytest.mark.e2e
 
@@ -61,13 +61,13 @@ def kitchen_ways(tmp_path_factory):
     """The kitchen the three ways: (recording, flags, options to read it offline)."""
     folder, camera = recording("redkitchen")
     tmp = tmp_path_factory.mktemp("kitchen")
-    options = SourceOptions(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale)
+    options = SourceSettings(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale)
     six_dof = tum_as_bag(folder, tmp / "6dof.bag", camera, way="tf-6dof")
     planar = tum_as_bag(folder, tmp / "planar.bag", camera, way="planar-base")
     return {
         "tum-folder": (folder, camera_flags(camera), options),
-        "tf-6dof": (six_dof, [], SourceOptions()),
-        "planar-base": (planar, [], SourceOptions()),
+        "tf-6dof": (six_dof, [], SourceSettings()),
+        "planar-base": (planar, [], SourceSettings()),
     }
 
 
@@ -132,7 +132,7 @@ def test_the_level_and_floor_of_the_kitchen_are_found() -> None:
     seen = points_at_heights(
         folder,
         (-0.1, 0.05),
-        SourceOptions(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale),
+        SourceSettings(intrinsics=camera.intrinsics, depth_scale=camera.depth_scale),
     )
     assert len(seen) > 1000, "the floor lies at z = 0 once levelled"
     assert np.isfinite(seen).all()
@@ -167,9 +167,9 @@ def test_the_doctor_asks_for_the_kitchen_folder_s_camera() -> None:
     """With TUM's intrinsics no frame of the kitchen sees its floor: the doctor asks for the
     camera instead of saying ready; with the recording's own it is ready."""
     folder, camera = recording("redkitchen")
-    guessed = inspect_tum(folder, SourceOptions())
+    guessed = inspect_tum(folder, SourceSettings())
     assert guessed.verdict.status == "check-camera"
     assert "--intrinsics FX,FY,CX,CY" in guessed.verdict.text
-    given = inspect_tum(folder, SourceOptions(intrinsics=camera.intrinsics))
+    given = inspect_tum(folder, SourceSettings(intrinsics=camera.intrinsics))
     assert given.verdict.status == "ready"
     assert "--depth-scale 1000" in given.verdict.text  # what its depth.txt says

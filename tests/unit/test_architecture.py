@@ -143,6 +143,21 @@ def test_a_static_analyser_resolves_every_import(tmp_path: Path) -> None:
     assert report["summary"]["errorCount"] == 1, report["generalDiagnostics"][:5]
 
 
+def test_configuration_classes_are_named_config_or_settings() -> None:
+    """``…Config`` tunes an algorithm, ``…Settings`` says how a service runs (architecture.md):
+    no third word for the same thing."""
+    others = sorted(
+        f"{path.relative_to(ROOT)} {node.name}"
+        for folder in ("common", "services", "wallmap")
+        for path in (ROOT / folder).rglob("*.py")
+        if path.relative_to(ROOT).parts[1:2] not in (("common",), ("services",))  # the links
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.ClassDef)
+        and node.name.endswith(("Params", "Parameters", "Options", "Conf", "Setup", "Tuning"))
+    )
+    assert not others, others
+
+
 def test_no_function_is_longer_than_60_lines() -> None:
     """Readable top to bottom: a function that does not fit on a screen does several jobs.
 

@@ -18,11 +18,11 @@ import pytest
 import zenoh
 
 from wallmap.common.delivery import AckWindow, StalledError, frames_in_turn
-from wallmap.common.link_settings import History
+from wallmap.common.link_settings import HistorySettings
 from wallmap.common.messages import Frame, Progress, pack
 from wallmap.common.runtime import Stats
 
-WINDOW = History(seconds=0.5)  # 30 frames at the highest rate
+WINDOW = HistorySettings(seconds=0.5)  # 30 frames at the highest rate
 
 KEY = "test/frames"
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.line_fit import fit_line
-from wallmap.common.ransac import RansacParams, RowReport, detect_lines, split_at_nans
+from wallmap.common.ransac import RansacConfig, RowReport, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
 
 
@@ -46,7 +46,7 @@ def room_scan(rng, noise=0.005):
 
 def test_sequential_ransac_finds_both_walls_of_a_corner():
     rng = np.random.default_rng(1)
-    lines = detect_lines(room_scan(rng), RansacParams(noise_k=0.0), rng)
+    lines = detect_lines(room_scan(rng), RansacConfig(noise_k=0.0), rng)
     got = sorted((round(float(line.offset), 2), tuple(np.round(line.normal, 2))) for line in lines)
     # x = 3 appears twice: split by the gap of no return (two clusters), as the paper does.
     assert got == [(1.6, (0.0, 1.0)), (3.0, (1.0, 0.0)), (3.0, (1.0, 0.0))]
@@ -60,7 +60,7 @@ def test_ransac_ignores_scattered_clutter():
     wall = np.column_stack([np.linspace(-2, 2, 100), np.full(100, 2.0)])
     clutter = rng.uniform([-2, 0.5], [2, 1.8], (40, 2))
     scan = np.vstack([wall[:50], clutter, wall[50:]])
-    lines = detect_lines(scan, RansacParams(noise_k=0.0), rng)
+    lines = detect_lines(scan, RansacConfig(noise_k=0.0), rng)
     assert len(lines) == 1
     assert lines[0].offset == pytest.approx(2.0, abs=0.005)
     assert lines[0].length == pytest.approx(4.0, abs=0.1)
@@ -70,7 +70,7 @@ def test_ransac_splits_collinear_walls_across_a_doorway():
     rng = np.random.default_rng(3)
     left = np.column_stack([np.linspace(-3, -0.5, 60), np.full(60, 2.0)])
     right = np.column_stack([np.linspace(0.5, 3, 60), np.full(60, 2.0)])
-    lines = detect_lines(np.vstack([left, right]), RansacParams(noise_k=0.0), rng)
+    lines = detect_lines(np.vstack([left, right]), RansacConfig(noise_k=0.0), rng)
     assert len(lines) == 2
     assert sorted(round(float(line.p0[0] + line.p1[0]) / 2, 1) for line in lines) == [-1.8, 1.8]
 
@@ -115,7 +115,7 @@ def far_glimpse(rng, share_of_cluster: bool) -> np.ndarray:
 
 
 def test_a_far_wall_alone_in_its_cluster_is_kept_though_its_direction_is_unsure():
-    params = RansacParams()
+    params = RansacConfig()
     scan = far_glimpse(np.random.default_rng(5), False)
     (line,) = detect_lines(scan, params, np.random.default_rng(0))
     assert params.max_angle_sd < line.angle_sd <= params.lone_angle_sd  # the rule was needed
@@ -125,11 +125,11 @@ def test_a_far_wall_alone_in_its_cluster_is_kept_though_its_direction_is_unsure(
 
 def test_the_same_glimpse_beside_another_wall_is_refused_as_unsure():
     scan = far_glimpse(np.random.default_rng(5), True)
-    lines = detect_lines(scan, RansacParams(), np.random.default_rng(0))
-    loose = detect_lines(scan, RansacParams(max_angle_sd=1.0), np.random.default_rng(0))
+    lines = detect_lines(scan, RansacConfig(), np.random.default_rng(0))
+    loose = detect_lines(scan, RansacConfig(max_angle_sd=1.0), np.random.default_rng(0))
     far = [line for line in loose if line.offset > 4.5 and abs(line.normal[1]) > 0.99]
     assert far  # found...
-    assert far[0].angle_sd > RansacParams().max_angle_sd  # ...but unsure...
+    assert far[0].angle_sd > RansacConfig().max_angle_sd  # ...but unsure...
     assert not [line for line in lines if line.offset > 4.5 and abs(line.normal[1]) > 0.99]
     assert len(lines) == 1  # ...so only the near wall is kept
 
@@ -146,7 +146,7 @@ def test_a_wall_split_at_its_neighbours_corner_is_joined_again():
     ranges = np.linalg.norm(scan, axis=1)
     scan += scan / ranges[:, None] * rng.normal(0, 2 * 1.425e-3 * ranges**2)[:, None]
     report = RowReport()
-    lines = detect_lines(scan, RansacParams(noise_scale=1.5), np.random.default_rng(0), report)
+    lines = detect_lines(scan, RansacConfig(noise_scale=1.5), np.random.default_rng(0), report)
     assert report.rejected["direction less sure than max_angle_sd"] >= 2  # two unsure pieces...
     angles = sorted(np.degrees(np.arctan2(-line.normal[0], line.normal[1])) for line in lines)
     assert len(lines) == 2  # ...joined into the short wall

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from rows import wall_stub_strays
 
-from wallmap.common.ransac import RansacParams, RowReport, detect_lines
+from wallmap.common.ransac import RansacConfig, RowReport, detect_lines
 
 
 def test_row_report_names_the_thresholds() -> None:
     report = RowReport()
-    lines = detect_lines(wall_stub_strays(), RansacParams(), np.random.default_rng(0), report)
+    lines = detect_lines(wall_stub_strays(), RansacConfig(), np.random.default_rng(0), report)
     assert len(lines) == 1
     assert report.points == 170
     assert report.clusters == [150, 15, 5]
