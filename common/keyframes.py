@@ -10,16 +10,24 @@ whose pose the interpolation would misplace must be a keyframe too.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from wallmap.common import se2
 
-Stamped = tuple[float, float, float, float]  # stamp, x, y, yaw
+
+class Keyframe(NamedTuple):
+    """A pose of the trajectory, where the robot was at ``stamp`` (s): x, y (m), yaw (rad)."""
+
+    stamp: float
+    x: float
+    y: float
+    yaw: float
 
 
 def interpolates(
-    first: Stamped, last: Stamped, between: Sequence[Stamped], max_xy: float, max_yaw: float
+    first: Keyframe, last: Keyframe, between: Sequence[Keyframe], max_xy: float, max_yaw: float
 ) -> bool:
     """Whether the poses ``between`` are where interpolating from ``first`` to ``last`` puts them.
 

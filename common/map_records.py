@@ -31,6 +31,7 @@ from wallmap.common.fields import (
     string,
     table,
 )
+from wallmap.common.keyframes import Keyframe
 
 Segment = tuple[Point, Point]
 COUNTERS = (
@@ -194,7 +195,7 @@ class MapReply:
     stamp: float | None = None
     walls: tuple[WallRecord, ...] = ()
     merges: tuple[tuple[int, int, float], ...] = ()
-    trajectory: tuple[tuple[float, float, float, float], ...] | None = None
+    trajectory: tuple[Keyframe, ...] | None = None
     counters: Mapping[str, Any] = field(default_factory=dict)
 
     def to_map(self) -> dict[str, Any]:
@@ -237,11 +238,10 @@ def _merge(value: Any) -> tuple[int, int, float]:
     return integer(merged, "merges"), integer(surviving, "merges"), number(stamp, "merges")
 
 
-def _keyframe(value: Any) -> tuple[float, float, float, float]:
+def _keyframe(value: Any) -> Keyframe:
     """A pose of the trajectory: ``[stamp, x, y, yaw]``."""
     row = listed(value, "trajectory", 4, "[stamp, x, y, yaw]")
-    stamp, x, y, yaw = (number(v, "trajectory") for v in row)
-    return stamp, x, y, yaw
+    return Keyframe(*(number(v, "trajectory") for v in row))
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.common.keyframes import Keyframe
 from wallmap.common.messages import Progress
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.map_config import MapperConfig
@@ -92,7 +93,7 @@ def from_json(data: dict[str, Any], config: MapperConfig) -> WallMap:
     wall_map.stamp = None if data["stamp"] is None else float(data["stamp"])
     wall_map.merges = [(int(a), int(b), float(t)) for a, b, t in data["merges"]]
     wall_map.trajectory = [
-        (float(t), float(x), float(y), float(a)) for t, x, y, a in data["trajectory"]
+        Keyframe(float(t), float(x), float(y), float(a)) for t, x, y, a in data["trajectory"]
     ]
     for w in data["walls"]:
         wall = Wall(

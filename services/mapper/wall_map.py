@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common import ekf, keyframes, se2, wall_model
-from wallmap.common.keyframes import Stamped
+from wallmap.common.keyframes import Keyframe
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
 from wallmap.services.mapper.map_config import MapperConfig
@@ -62,8 +62,8 @@ class WallMap:
         self.frames = 0
         self.observations = 0
         self.stamp: float | None = None
-        self.trajectory: list[Stamped] = []  # keyframes: stamp, x, y, yaw
-        self._since_keyframe: list[Stamped] = []  # the poses used since the last keyframe
+        self.trajectory: list[Keyframe] = []  # keyframes: stamp, x, y, yaw
+        self._since_keyframe: list[Keyframe] = []  # the poses used since the last keyframe
         self.merges: list[tuple[int, int, float]] = []  # (merged id, surviving id, stamp)
         self.changed: set[int] = set()  # since the last take_changes()
         self.removed: set[int] = set()
@@ -141,7 +141,7 @@ class WallMap:
             ):
                 self.changed.add(wall.id)
 
-    def path(self) -> list[Stamped]:
+    def path(self) -> list[Keyframe]:
         """The keyframes, then the newest pose used: what the map reply's trajectory is."""
         return self.trajectory + self._since_keyframe[-1:]
 
@@ -150,7 +150,7 @@ class WallMap:
 
         Judged poses are corrected frame by frame (``common.keyframes``).
         """
-        new: Stamped = (pose.stamp, pose.x, pose.y, pose.yaw)
+        new = Keyframe(pose.stamp, pose.x, pose.y, pose.yaw)
         cfg = self.config
         pending = self._since_keyframe
         if not self.trajectory or new[0] <= self.trajectory[-1][0]:
