@@ -141,14 +141,18 @@ def inspect_tum(path: Path, source: SourceSettings) -> Report:
         )
     except PlayerError as err:
         return _refuse(report, str(err))
-    _fill_tum(report, folder)
+    _fill_tum(report, folder, given=source.pose_source is not None)
     level = folder.placement.level
     report.verdict = tum_verdict(report, source.intrinsics, folder.depth_scale, level)
     return report
 
 
-def _fill_tum(report: Report, folder: TumFolder) -> None:
-    """A TUM folder's facts: its depth images as the sensor, its trajectory as the pose source."""
+def _fill_tum(report: Report, folder: TumFolder, *, given: bool) -> None:
+    """A TUM folder's facts: its depth images as the sensor, its trajectory as the pose source.
+
+    ``given``: the pose source was asked for (``--pose-source``), not the folder's default, so
+    the command the verdict recommends must say it too.
+    """
     report.readable = True
     stamps = np.array([stamp for stamp, _ in folder.entries])
     report.start, report.duration = float(stamps[0]), folder.duration
@@ -165,7 +169,7 @@ def _fill_tum(report: Report, folder: TumFolder) -> None:
         geometry={"width": width, "height": height, "encoding": f"PNG / {folder.depth_scale:g}"},
     )
     spec = str(folder.pose_spec)
-    pose = PoseFacts(spec, default=True, available=folder.pose_spec.kind == "tum", player="ok")
+    pose = PoseFacts(spec, default=not given, available=folder.pose_spec.kind == "tum", player="ok")
     if pose.available:
         posed = sum(folder.pose_at(float(s)) is not None for s in stamps)
         pose.frames_with_pose, pose.placement = posed, folder.placement.describe() or None

@@ -126,7 +126,8 @@ def tum_verdict(
     assert report.sensor is not None  # set for every readable folder
     frames, pose = report.sensor.frames, report.poses[0]
     camera = ["--intrinsics", ",".join(f"{v:g}" for v in intrinsics)]
-    command = _up(report.path, *camera, "--depth-scale", f"{depth_scale:g}")
+    given = () if pose.default else ("--pose-source", pose.source)
+    command = _up(report.path, *camera, "--depth-scale", f"{depth_scale:g}", *given)
     if not pose.available or not pose.frames_with_pose:
         return Verdict("no-poses", f"no poses: give --pose-source tum:FILE (`{command}`)")
     if intrinsics == TUM_INTRINSICS and level and level.frames and level.floor is None:

@@ -173,3 +173,20 @@ def test_the_doctor_asks_for_the_kitchen_folder_s_camera() -> None:
     given = inspect_tum(folder, SourceSettings(intrinsics=camera.intrinsics))
     assert given.verdict.status == "ready"
     assert "--depth-scale 1000" in given.verdict.text  # what its depth.txt says
+
+
+def test_the_doctors_command_for_a_tum_folder_keeps_the_pose_source_it_was_given(
+    tmp_path: Path,
+) -> None:
+    """``--pose-source tum:FILE`` given: the ``wallmap up`` it recommends plays with it too
+    (it used to leave it out, and so mapped with the folder's own trajectory)."""
+    folder, camera = recording("redkitchen")
+    other = tmp_path / "poses.txt"
+    other.write_text((folder / "groundtruth.txt").read_text())
+    how = SourceSettings(intrinsics=camera.intrinsics, pose_source=f"tum:{other}")
+    report = inspect_tum(folder, how)
+    assert report.verdict.status == "ready"
+    assert report.verdict.command is not None
+    assert f"--pose-source tum:{other}" in report.verdict.command
+    default = inspect_tum(folder, SourceSettings(intrinsics=camera.intrinsics))
+    assert "--pose-source" not in (default.verdict.command or "")
