@@ -332,7 +332,7 @@ def _draw_labels(
     px = drawing.to_px
     for room in rooms:
         centre = px(np.asarray(room["centroid"], dtype=float))
-        text = f"R{room['id']} {room['area']:.1f} m"
+        text = f"R{room['id']} {room['area']:.1f} m²"
         drawing.items.append(Label((centre[0], centre[1]), text, glyph, LABEL_COLOUR, "room-label"))
     for w in walls:
         ends = np.array([w.pieces[0][0], w.pieces[-1][1]])
@@ -431,6 +431,25 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
     return ImageFont.load_default()
 
 
+PLAIN = {"²": "2"}  # spelt plainly where the font has no glyph for it (Pillow's own has none)
+
+
+def _spelt(text: str, font: ImageFont.FreeTypeFont | ImageFont.ImageFont) -> str:
+    """The text with each character the font lacks (it would draw a box) spelt plainly."""
+    for char, plain in PLAIN.items():
+        if char in text and not _has_glyph(font, char):
+            text = text.replace(char, plain)
+    return text
+
+
+def _has_glyph(font: ImageFont.FreeTypeFont | ImageFont.ImageFont, char: str) -> bool:
+    """Whether ``font`` draws ``char`` as itself, not as the box of a missing glyph."""
+    if not isinstance(font, ImageFont.FreeTypeFont):
+        return False  # the bitmap font: ASCII only
+    drawn, box = font.getmask(char), font.getmask("\ue000")  # private use: drawn by no font
+    return drawn.size != box.size or bytes(drawn) != bytes(box)
+
+
 def _ink(
     text: str, font: ImageFont.FreeTypeFont | ImageFont.ImageFont, margin: int, stroke: int = 0
 ) -> Image.Image:
@@ -451,6 +470,7 @@ def _text_masks(text: str, size: int) -> tuple[Image.Image, Image.Image]:
     and size either way.
     """
     font = _font(size)
+    text = _spelt(text, font)
     if isinstance(font, ImageFont.FreeTypeFont):
         pad = SUPERSAMPLE  # a picture pixel
         return _ink(text, font, pad), _ink(text, font, pad, stroke=pad)

@@ -352,3 +352,12 @@ def test_rooms_are_polygons_and_doors_lines_in_geojson_and_drawn_in_svg(tmp_path
     assert text.count('class="room"') == 1
     assert text.count('class="door"') == 1
     assert "R3 45.0 m" in text
+
+
+def test_a_room_label_draws_no_missing_glyph_box() -> None:
+    """Areas are in m²; a font without "²" (Pillow's own) gets "m2", never a box."""
+    font = plot._font(40)
+    assert not plot._has_glyph(font, "\ue001"), "a character no font has is seen as missing"
+    text = plot._spelt("R0 32.4 m²", font)
+    assert text in ("R0 32.4 m²", "R0 32.4 m2")
+    assert all(plot._has_glyph(font, c) for c in text if not c.isspace())
