@@ -143,11 +143,12 @@ def align(a: Walls, b: Walls, config: AlignConfig | None = None) -> Alignment | 
         return None
     scored.sort(key=lambda item: -item[0])
     best_score, best = scored[0]
-    pose, cov, matched, overlap = refine(a, b, best, config)
+    pose, cov, owner, length = _refined(a, b, best, config)
+    matched, overlap = int((owner >= 0).sum()), float(length[owner >= 0].sum())
     if (
         matched < config.min_matched
         or overlap < config.min_overlap
-        or not _spread(a, b.moved(pose), config)
+        or not _spread(a, owner, config)
     ):
         return None
     other = max((s for s, p in scored[1:] if _different(p, pose)), default=0.0)
@@ -280,9 +281,11 @@ def _score(a: Walls, b: Walls, config: AlignConfig) -> tuple[float, int]:
     return float(length[owner >= 0].sum()), int((owner >= 0).sum())
 
 
-def _spread(a: Walls, b: Walls, config: AlignConfig) -> bool:
-    """Whether the matched walls run in two directions ``min_spread`` apart (they fix a shift)."""
-    owner, _, _ = _matches(a, b, config)
+def _spread(a: Walls, owner: Array, config: AlignConfig) -> bool:
+    """Whether the walls of A matched by B's run in two directions ``min_spread`` apart.
+
+    Two such directions fix a shift. ``owner``: which wall of A each of B's lies on (-1: none).
+    """
     angles = a.angle[owner[owner >= 0]]
     gaps = np.abs(_angle_gap(angles[:, None], angles[None, :]))
     return bool(len(angles) and gaps.max() >= math.radians(config.min_spread))
@@ -299,16 +302,29 @@ def refine(a: Walls, b: Walls, pose: Array, config: AlignConfig) -> tuple[Array,
     Matches are found again each step. Returns the pose, its covariance, the matches and the
     length of B's walls on A's.
     """
+    pose, cov, owner, length = _refined(a, b, pose, config)
+    return pose, cov, int((owner >= 0).sum()), float(length[owner >= 0].sum())
+
+
+def _refined(
+    a: Walls, b: Walls, pose: Array, config: AlignConfig
+) -> tuple[Array, Array, Array, Array]:
+    """``refine``'s pose and covariance, with the matches at that pose.
+
+    The matches: which wall of A each of B's lies on (-1: none), and the length of each on it.
+    """
     pose = np.asarray(pose, dtype=float).copy()
     cov = np.eye(3)
+    normals = _normals(a)
+    rhos = np.einsum("nk,nk->n", normals, a.a)
     for _ in range(config.iterations):
         owner, ends, length = _matches(a, b.moved(pose), config)
         keep = owner >= 0
         if keep.sum() < 2:
             break
         local = _back(ends[keep].reshape(-1, 2), pose)  # the stretches' ends in B's frame
-        normal = np.repeat(_normals(a)[owner[keep]], 2, axis=0)
-        rho = np.repeat(np.einsum("nk,nk->n", _normals(a), a.a)[owner[keep]], 2)
+        normal = np.repeat(normals[owner[keep]], 2, axis=0)
+        rho = np.repeat(rhos[owner[keep]], 2)
         weight = np.repeat(length[keep], 2)  # a longer stretch says more
         r = point_line_residuals(pose, local, normal, rho)
         j = point_line_jacobian(pose, local, normal)
@@ -323,7 +339,7 @@ def refine(a: Walls, b: Walls, pose: Array, config: AlignConfig) -> tuple[Array,
         if np.hypot(*step[:2]) < 1e-5 and abs(step[2]) < 1e-7:
             break
     owner, _, length = _matches(a, b.moved(pose), config)
-    return pose, 0.5 * (cov + cov.T), int((owner >= 0).sum()), float(length[owner >= 0].sum())
+    return pose, 0.5 * (cov + cov.T), owner, length
 
 
 def _back(points: Array, pose: Array) -> Array:
