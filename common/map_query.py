@@ -9,7 +9,7 @@ Zenoh is ``common.map_requests``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 
@@ -84,3 +84,27 @@ class MapQuery:
         if self.trajectory:
             params["trajectory"] = "true"
         return params
+
+    def crosses(self, segments: Iterable[Sequence[Sequence[float]]]) -> bool:
+        """Whether a wall of these segments ((x, y), (x, y)) is in the ``bbox``: one meets it.
+
+        Any wall is, without a ``bbox``. The mapper and a fleet's merge service select alike.
+        """
+        return self.bbox is None or any(segment_crosses_box(p, q, self.bbox) for p, q in segments)
+
+
+def segment_crosses_box(
+    p: Sequence[float], q: Sequence[float], box: tuple[float, float, float, float]
+) -> bool:
+    """Whether segment p-q meets the box (xmin, ymin, xmax, ymax): Liang-Barsky clipping."""
+    start, end = 0.0, 1.0
+    for axis in (0, 1):
+        p0, d = float(p[axis]), float(q[axis]) - float(p[axis])
+        lo, hi = box[axis], box[axis + 2]
+        if abs(d) < 1e-12:
+            if not lo <= p0 <= hi:
+                return False
+            continue
+        t0, t1 = sorted(((lo - p0) / d, (hi - p0) / d))
+        start, end = max(start, t0), min(end, t1)
+    return start <= end

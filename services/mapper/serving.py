@@ -49,20 +49,6 @@ def _passes(ends: list[float], px: float, py: float, margin: float) -> bool:
     return margin < along < length - margin
 
 
-def _crosses_box(p0: Array, p1: Array, box: tuple[float, float, float, float]) -> bool:
-    """Whether segment p0-p1 meets the box (Liang-Barsky clipping)."""
-    lo, hi = np.array(box[:2]), np.array(box[2:])
-    start, end, d = 0.0, 1.0, p1 - p0
-    for axis in (0, 1):
-        if abs(d[axis]) < 1e-12:
-            if not lo[axis] <= p0[axis] <= hi[axis]:
-                return False
-            continue
-        t0, t1 = sorted(((lo[axis] - p0[axis]) / d[axis], (hi[axis] - p0[axis]) / d[axis]))
-        start, end = max(start, t0), min(end, t1)
-    return start <= end
-
-
 def _shadowed(wall_map: WallMap, wall: Wall) -> bool:
     """Whether far better supported walls run along most of this one (see MapperConfig).
 
@@ -157,7 +143,7 @@ def _selected(wall_map: WallMap, wall: Wall, query: MapQuery, cache: dict[int, b
         return False
     if query.since is not None and wall.last_seen < query.since:
         return False
-    return query.bbox is None or any(_crosses_box(a, b, query.bbox) for a, b in wall.segments())
+    return query.crosses(wall.segments())
 
 
 def cornered_segments(

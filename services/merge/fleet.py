@@ -244,13 +244,4 @@ def _selected(wall: WallRecord, query: MapQuery) -> bool:
         return False
     if query.since is not None and (wall.last_seen is None or wall.last_seen < query.since):
         return False
-    if query.bbox is None:
-        return True
-    xmin, ymin, xmax, ymax = query.bbox
-    return any(
-        max(a[0], b[0]) >= xmin
-        and min(a[0], b[0]) <= xmax
-        and max(a[1], b[1]) >= ymin
-        and min(a[1], b[1]) <= ymax
-        for a, b in wall.segments
-    )
+    return query.crosses(wall.segments)
