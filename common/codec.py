@@ -8,6 +8,7 @@ version; anything else is refused with a :class:`MessageError` that says why.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -78,6 +79,16 @@ def _unpack_hook(obj: dict[Any, Any]) -> object:
 def encode(message: dict[str, Any]) -> bytes:
     """Pack a message map, adding the schema version."""
     return msgpack.packb({"v": SCHEMA_VERSION, **message}, default=_pack_default, use_bin_type=True)
+
+
+def encode_as(message: dict[str, Any], fmt: str) -> bytes:
+    """A reply in the format its query asked for: msgpack (``encode``) or ``json``.
+
+    Either way with the schema version. ``message`` holds plain values (JSON has no arrays).
+    """
+    if fmt == "json":
+        return json.dumps({"v": SCHEMA_VERSION, **message}).encode()
+    return encode(message)
 
 
 def decode(payload: bytes) -> dict[str, Any]:

@@ -14,7 +14,7 @@ from collections.abc import Iterable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from wallmap.common.codec import SCHEMA_VERSION, encode
+from wallmap.common.codec import encode_as
 from wallmap.common.frame_order import RunProgress
 from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Progress
@@ -106,8 +106,5 @@ class MapperCore:
             key = (state, query, fmt)
             if key not in self._replies:
                 body = replace(serving.reply(self.map, query), counters=extra).to_map()
-                if fmt == "json":
-                    self._replies[key] = json.dumps({"v": SCHEMA_VERSION, **body}).encode()
-                else:
-                    self._replies[key] = encode(body)
+                self._replies[key] = encode_as(body, fmt)
             return self._replies[key]

@@ -10,12 +10,11 @@ as markers on ``{prefix}/rooms/markers``.
 
 from __future__ import annotations
 
-import json
 import threading
 
 import zenoh
 
-from wallmap.common.codec import encode
+from wallmap.common.codec import encode_as
 from wallmap.common.runtime import Stats, drain
 from wallmap.common.transport import Keys
 from wallmap.services.mapper import serving
@@ -53,7 +52,7 @@ class RoomsServer:
     @staticmethod
     def _encode(reply: RoomsReply) -> dict[str, bytes]:
         body = reply.to_map()
-        return {"msgpack": encode(body), "json": json.dumps(body).encode()}
+        return {fmt: encode_as(body, fmt) for fmt in ("msgpack", "json")}
 
     def workers(self, stop: threading.Event) -> list[threading.Thread]:
         """The threads to start: the segmenting worker and the query answerer."""

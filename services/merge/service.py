@@ -13,7 +13,6 @@ each robot's frame lies, and its path there) answer from the last fusion.
 
 from __future__ import annotations
 
-import json
 import logging
 import queue
 import threading
@@ -22,7 +21,7 @@ from typing import Any
 
 import zenoh
 
-from wallmap.common.codec import SCHEMA_VERSION, encode
+from wallmap.common.codec import encode, encode_as
 from wallmap.common.link_settings import TransportError, ZenohSettings, plain_prefix
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply
@@ -119,7 +118,7 @@ class _Served:
     def walls(self, query: MapQuery, fmt: str) -> bytes:
         with self._lock:
             body = self._fleet.reply(query).to_map()
-        return json.dumps({"v": SCHEMA_VERSION, **body}).encode() if fmt == "json" else encode(body)
+        return encode_as(body, fmt)
 
     def robots(self) -> dict[str, Any]:
         with self._lock:
@@ -213,9 +212,9 @@ def _answer(channel: zenoh.handlers.Handler[zenoh.Query], body: Callable[[], dic
         with query:
             fmt = query.parameters.get("format") or "msgpack"
             if fmt == "json":
-                payload = json.dumps({"v": SCHEMA_VERSION, **body()}).encode()
+                payload = encode_as(body(), fmt)
                 query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
             elif fmt == "msgpack":
-                query.reply(query.key_expr, encode(body()))
+                query.reply(query.key_expr, encode_as(body(), fmt))
             else:
                 query.reply_err(f"format must be msgpack or json, got {fmt!r}")
