@@ -103,13 +103,24 @@ def answer_map_queries(
             except ValueError as err:
                 query.reply_err(str(err))
                 continue
-            fmt = params.get("format") or "msgpack"
-            if fmt not in ("msgpack", "json"):
-                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+            if not reply_in_format(query, lambda fmt, selection=selection: reply(selection, fmt)):
                 continue
-            if fmt == "json":
-                encoding = zenoh.Encoding.APPLICATION_JSON
-                query.reply(query.key_expr, reply(selection, fmt), encoding=encoding)
-            else:
-                query.reply(query.key_expr, reply(selection, fmt))
         count("queries")
+
+
+def reply_in_format(query: zenoh.Query, payload: Callable[[str], bytes]) -> bool:
+    """Answer with ``payload(format)`` in the format asked for; whether it was answered.
+
+    ``format=msgpack`` (the default) or ``format=json`` (with Zenoh's JSON encoding); another is
+    refused with the reason. Every queryable of the map (walls, rooms, a fleet's robots)
+    answers alike.
+    """
+    fmt = query.parameters.get("format") or "msgpack"
+    if fmt not in ("msgpack", "json"):
+        query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+        return False
+    if fmt == "json":
+        query.reply(query.key_expr, payload(fmt), encoding=zenoh.Encoding.APPLICATION_JSON)
+    else:
+        query.reply(query.key_expr, payload(fmt))
+    return True

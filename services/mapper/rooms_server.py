@@ -15,6 +15,7 @@ import threading
 import zenoh
 
 from wallmap.common.codec import encode_as
+from wallmap.common.map_requests import reply_in_format
 from wallmap.common.runtime import Stats, drain
 from wallmap.common.transport import Keys
 from wallmap.services.mapper import serving
@@ -117,13 +118,6 @@ class RoomsServer:
         for query in drain(self._queryable.handler):
             self._refresh()
             with query:
-                fmt = query.parameters.get("format") or "msgpack"
-                if fmt not in self._encoded:
-                    query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+                if not reply_in_format(query, self._encoded.__getitem__):
                     continue
-                encoding = zenoh.Encoding.APPLICATION_JSON if fmt == "json" else None
-                if encoding is None:
-                    query.reply(query.key_expr, self._encoded[fmt])
-                else:
-                    query.reply(query.key_expr, self._encoded[fmt], encoding=encoding)
             self._stats.add("room_queries")

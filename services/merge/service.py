@@ -31,6 +31,7 @@ from wallmap.common.map_requests import (
     answer_map_queries,
     fetch_map,
     fetch_rooms,
+    reply_in_format,
 )
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, key_expression, open_session
@@ -210,11 +211,4 @@ def _answer(channel: zenoh.handlers.Handler[zenoh.Query], body: Callable[[], dic
     """Answer each query with ``body()``, msgpack or (``format=json``) JSON."""
     for query in drain(channel):
         with query:
-            fmt = query.parameters.get("format") or "msgpack"
-            if fmt == "json":
-                payload = encode_as(body(), fmt)
-                query.reply(query.key_expr, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
-            elif fmt == "msgpack":
-                query.reply(query.key_expr, encode_as(body(), fmt))
-            else:
-                query.reply_err(f"format must be msgpack or json, got {fmt!r}")
+            reply_in_format(query, lambda fmt: encode_as(body(), fmt))

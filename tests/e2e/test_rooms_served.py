@@ -100,8 +100,20 @@ def test_query_plot_and_export_show_the_live_mappers_rooms(stack, strip, tmp_pat
     ring = polygons[0]["geometry"]["coordinates"][0]
     assert ring[0] == ring[-1], "a closed ring"
     # ROS 2 out: the rooms' markers, held for a late subscriber as a transient-local topic.
+    keys = Keys(stack.prefix)
     with open_session(ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)) as session:
-        replies = list(session.get(Keys(stack.prefix).room_markers, timeout=5.0))
+        replies = list(session.get(keys.room_markers, timeout=5.0))
+        # Asked as JSON, each of the map's queryables answers JSON with the schema version; a
+        # format neither msgpack nor JSON is refused, saying why.
+        for key, part in ((keys.map_rooms, "rooms"), (keys.map_walls, "walls")):
+            (reply,) = session.get(f"{key}?format=json", timeout=5.0)
+            body = json.loads(reply.ok.payload.to_bytes())
+            assert body["v"] == 1
+            assert len(body[part]) >= 3, body
+            assert str(reply.ok.encoding).startswith("application/json")
+            (refused,) = session.get(f"{key}?format=xml", timeout=5.0)
+            assert refused.ok is None
+            assert "format must be msgpack or json" in refused.err.payload.to_string()
     array = ros2_out.decode(replies[0].ok.payload.to_bytes(), "visualization_msgs/msg/MarkerArray")
     assert sorted({m.ns for m in array.markers}) == ["doors", "room_labels", "rooms"]
     assert sum(m.ns == "rooms" for m in array.markers) == 3
