@@ -116,6 +116,8 @@ def jackal(out: Path | None) -> None:
         walls, share = explained(pipeline, JACKAL)
         found = pipeline.mapping.judge.summary() if pipeline.mapping.judge else {}
         latency = f"{found['latency_s'] * 1e3:+.0f} ms" if found else "-"
+        if found and not found["settled"]:
+            latency = "guess"
         heading = f"{found['heading_sd_deg']:.2f} deg" if found else "-"
         refused = str(found.get("frames_refused", "-"))
         ms = f"{statistics.median(mapper_ms):.2f}" if mapper_ms else "-"

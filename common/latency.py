@@ -30,8 +30,11 @@ MATCH_OFFSET = 0.3  # m: ...nor lines whose distances from the robot differ more
 TURN_FLOOR = math.radians(0.02)  # no frame-to-frame turn is seen better than this
 OUTLIER = 3.0  # residuals beyond this many sigma are outliers: a mismatched line, a glitch
 SMOOTH = 0.1  # s: the source's heading is averaged over this, as the lines see turns
+GRID = 0.01  # s: the source's heading is resampled on this grid to be averaged
 CHAIN = 4  # consecutive frame-to-frame turns added into one
-CLEAR = 4.0  # the fit's cost rises this much 20 ms either side of its minimum: a clear estimate
+# The fit's cost rises this much 20 ms either side of its minimum, and is this much higher at
+# every latency farther off: a clear estimate.
+CLEAR = 4.0
 
 
 @dataclass(frozen=True)
@@ -82,16 +85,16 @@ def _chained(turns: Array) -> tuple[Array, Array, Array]:
 
 
 def _smoothed(stamps: Array, yaw: Array) -> tuple[Array, Array]:
-    """The source's heading on a 10 ms grid, averaged over ``SMOOTH``.
+    """The source's heading on a ``GRID`` grid, averaged over ``SMOOTH``.
 
     A noisy tracker's heading jitters by more than the latency's effect on one turn, the
     average does not (and a symmetric average shifts nothing in time).
     """
-    grid = np.arange(stamps[0], stamps[-1], 0.01)
+    grid = np.arange(stamps[0], stamps[-1], GRID)
     if len(grid) < 3:
         return stamps, yaw
     resampled = np.interp(grid, stamps, yaw)
-    half = round(SMOOTH / 0.02)  # an odd width, centred: an even one would shift by 5 ms
+    half = round(SMOOTH / (2 * GRID))  # an odd width, centred: an even one would shift by 5 ms
     kernel = np.ones(2 * half + 1) / (2 * half + 1)
     padded = np.pad(resampled, (half, half), mode="edge")
     return grid, np.convolve(padded, kernel, mode="valid")
@@ -154,11 +157,19 @@ class LatencyEstimator:
     def estimate(self, stamps: Array, yaw: Array) -> Estimate | None:
         """The latency that best explains the turns, None until the turns say it clearly.
 
-        ``yaw``: the source's heading (unwrapped) at increasing ``stamps``.
+        ``yaw``: the source's heading (unwrapped) at increasing ``stamps``. Only the turns these
+        poses cover at every latency looked for are read: how many poses a source has sent
+        beyond them is a matter of timing (how far ahead of the frames it runs), and must
+        change nothing, nor may a turn be read off the poses' clamped end.
         """
         if len(self._turns) < 20 or len(stamps) < 2:
             return None
         t0, t1, seen = _chained(np.array(self._turns))
+        margin = SMOOTH / 2 + GRID  # the average's edge, where it is padded
+        covered = (t0 + self.grid[0] - margin >= stamps[0]) & (
+            t1 + self.grid[-1] + margin <= stamps[-1]
+        )
+        t0, t1, seen = t0[covered], t1[covered], seen[covered]
         if len(t0) < 10:
             return None
         grid, smooth = _smoothed(stamps, yaw)
@@ -176,7 +187,10 @@ class LatencyEstimator:
         step = float(self.grid[1] - self.grid[0])
         near = max(1, round(0.02 / step))
         rise = min(cost[max(best - near, 0)], cost[min(best + near, len(cost) - 1)]) - cost[best]
-        if rise < CLEAR:
+        # Clear: the cost rises either side, and no latency farther off fits nearly as well
+        # (turns that say two latencies, as a noisy tracker's can, say neither).
+        far = np.abs(np.arange(len(cost)) - best) > near
+        if rise < CLEAR or cost[far].min(initial=np.inf) - cost[best] < CLEAR:
             return None
         low, mid, high = cost[best - 1], cost[best], cost[best + 1]
         curvature = (low - 2 * mid + high) / step**2

@@ -191,7 +191,8 @@ def inspect_latency(path: Path, config: Config, frames: int) -> LatencyFacts:
     if not found["settled"]:
         note = (
             f"not estimated: the first {judged} frames do not say it (the sensor hardly "
-            "turns, or sees few walls); the mapper estimates it as it goes"
+            "turns, sees few walls, or its turns fit several latencies); the mapper estimates "
+            "it as it goes"
         )
         return LatencyFacts(None, None, judged, note)
     note = f"estimated from how the first {judged} frames' walls turn against the poses"

@@ -44,7 +44,10 @@ def format_table(reply: MapReply) -> str:
 
 def describe_pose_source(found: dict[str, Any]) -> str:
     """What the pose judge found of the pose source (the reply's ``pose_source``), one line."""
-    how = "given" if found.get("latency_fixed") else "estimated"
+    if found.get("latency_fixed"):
+        how = "given"
+    else:  # older mappers did not say whether it was settled: theirs was estimated
+        how = "estimated" if found.get("settled", True) else "not yet estimated: the guess"
     return (
         f"poses: latency {found['latency_s'] * 1e3:+.0f} ms ({how}), noise "
         f"{found['position_sd_m'] * 100:.1f} cm / {found['heading_sd_deg']:.2f} deg; frames "

@@ -53,7 +53,8 @@ class Mapping:
         self.judge = judged
         self.rooms = RoomMap()  # the floor each integrated frame saw, segmented on demand
         self.latency = judge.latency or 0.0  # of poses taken as they come
-        self.lookahead = judge.lookahead()
+        # How far past the newest pose a frame's pose may be carried on (s).
+        self.lookahead = max(judge.lookahead(), self.poses.config.tolerance)
         # The first frames' observations, kept until the latency is known (PoseJudge.settled);
         # never for a map restored from a state file: a remap would lose its walls.
         remappable = judged is not None and not judged.settled and not self.map.walls

@@ -37,7 +37,9 @@ class PoseBufferConfig:
     Attributes:
         max_age: poses older than the newest by more than this are forgotten (s).
         max_gap: longest time between two poses that is interpolated across (s).
-        tolerance: how far beyond the first or last pose a stamp may be and still take it (s).
+        tolerance: how far before the first pose a stamp may be and still take it (s), and
+            how far past the newest it may be carried on once it has waited (``Mapping``):
+            at once, the pose it takes would depend on whether the next had come yet.
         jump_distance: a move this far (m) between consecutive poses is logged as a jump...
         jump_angle: ...and so is a turn this large (rad): a localiser may jump (REP-105), but a
             user should see it when walls come out doubled.
@@ -120,15 +122,13 @@ class PoseBuffer:
             )
 
     def lookup(self, stamp: float) -> Pose | Lookup:
-        """The pose at ``stamp``, or why there is none."""
+        """The pose at ``stamp``, or why there is none: past the newest, wait for the next."""
         tol = self.config.tolerance
-        if not self._stamps or stamp > self._stamps[-1] + tol:
+        if not self._stamps or stamp > self._stamps[-1]:
             return Lookup.WAIT
         if stamp < self._stamps[0] - tol:
             return Lookup.MISSING
         i = bisect.bisect_left(self._stamps, stamp)
-        if i == len(self._stamps):
-            return self._poses[-1]
         if i == 0 or self._stamps[i] == stamp:
             return self._poses[i]
         before, after = self._poses[i - 1], self._poses[i]
@@ -161,9 +161,8 @@ class PoseBuffer:
         if isinstance(found, Lookup):
             return found
         i = bisect.bisect_left(self._stamps, stamp)
-        if (i < len(self._stamps) and self._stamps[i] == stamp) or i in (0, len(self._stamps)):
-            index = min(i, len(self._stamps) - 1)
-            return SourcePose(found, self._velocity_at(index), 0.0)
+        if i == 0 or self._stamps[i] == stamp:
+            return SourcePose(found, self._velocity_at(i), 0.0)
         before, after = self._poses[i - 1], self._poses[i]
         return SourcePose(found, _velocity(before, after), after.stamp - before.stamp)
 
@@ -175,11 +174,12 @@ class PoseBuffer:
     def headings(self, start: float, end: float) -> tuple[Array, Array]:
         """The stamps and unwrapped headings of the poses from ``start`` to ``end``.
 
-        One pose either side is included: what a latency estimate reads the source's turning
-        from.
+        One pose before ``start`` is included, none after ``end``: what a latency estimate
+        reads the source's turning from, and the poses that came after ``end`` depend on when
+        the source sent them.
         """
         low = max(bisect.bisect_left(self._stamps, start) - 1, 0)
-        high = min(bisect.bisect_right(self._stamps, end) + 1, len(self._stamps))
+        high = bisect.bisect_right(self._stamps, end)
         poses = self._poses[low:high]
         stamps = np.array([p.stamp for p in poses])
         return stamps, np.unwrap(np.array([p.yaw for p in poses]))

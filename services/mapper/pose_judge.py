@@ -182,7 +182,7 @@ class PoseJudge:
 
         ``poses``: the source's poses, which the latency estimate reads the source's turns from.
         """
-        self._learn_latency(frame, poses)
+        self._learn_latency(frame, source.pose.stamp, poses)
         self._predict(frame.stamp)
         if self.jumps.add(frame.stamp, source.pose.vector):
             self.jumped = frame.stamp
@@ -221,11 +221,14 @@ class PoseJudge:
         steady = self.jumped is None or stamp - self.jumped > SUSPECT_FOR
         return Verdict(_as_pose(source.pose, stamp, x0, cov), "unjudged", start_walls=steady)
 
-    def _learn_latency(self, frame: Observations, poses: PoseBuffer) -> None:
+    def _learn_latency(self, frame: Observations, placed_by: float, poses: PoseBuffer) -> None:
         """The frame's lines into the turning history; every LATENCY_EVERY turns, re-estimate.
 
         Counted as turns come, not as the history's length: a full history keeps its length,
-        and an estimate reads all of it (a few ms), which every frame cannot afford.
+        and an estimate reads all of it (a few ms), which every frame cannot afford. The
+        source's poses are read up to ``placed_by``, the stamp of the one the frame is placed
+        by: those have all come, whatever came after them depends on when (a run played twice
+        is mapped the same).
         """
         if self.config.latency is not None or not frame.walls:
             return
@@ -234,7 +237,7 @@ class PoseJudge:
         if self.turns.added % LATENCY_EVERY or span is None:
             return
         reach = self.config.max_latency + 0.1
-        found = self.turns.estimate(*poses.headings(span[0] - reach, span[1] + reach))
+        found = self.turns.estimate(*poses.headings(span[0] - reach, placed_by))
         if found is None:
             return
         if not self.settled:

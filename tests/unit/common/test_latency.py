@@ -32,7 +32,8 @@ def test_a_line_turns_against_the_robot() -> None:
     assert line_turn(before, np.zeros((0, 2))) is None
 
 
-def _estimate(latency: float, sd: float = 0.0, rate: float = 15.0, turning: bool = True):
+def _turns_and_poses(latency: float, sd: float = 0.0, rate: float = 15.0, turning: bool = True):
+    """An estimator given 40 s of frames, and the late source's poses from -1 to 41 s."""
     rng = np.random.default_rng(1)
     estimator = LatencyEstimator(max_latency=0.25)
     frames = np.arange(0.0, 40.0, 1.0 / rate)
@@ -42,6 +43,11 @@ def _estimate(latency: float, sd: float = 0.0, rate: float = 15.0, turning: bool
     # The source is late: its pose stamped s is the robot's at s - latency.
     stamps = np.arange(-1.0, 41.0, 0.01)
     yaw = true(stamps - latency) + rng.normal(0.0, math.radians(sd), len(stamps))
+    return estimator, stamps, yaw
+
+
+def _estimate(latency: float, sd: float = 0.0, rate: float = 15.0, turning: bool = True):
+    estimator, stamps, yaw = _turns_and_poses(latency, sd, rate, turning)
     return estimator.estimate(stamps, yaw)
 
 
@@ -61,3 +67,35 @@ def test_a_noisy_source_still_gives_it_within_10_ms() -> None:
 
 def test_a_robot_that_never_turns_says_nothing() -> None:
     assert _estimate(0.08, turning=False) is None
+
+
+def test_turns_newer_than_the_poses_are_not_read() -> None:
+    """Frames the source has not yet sent poses for (as in real time, the newest) wait: read
+    off the poses' clamped end, they would pull the estimate towards no turn."""
+    estimator, stamps, yaw = _turns_and_poses(0.08, sd=0.3)
+    older = LatencyEstimator(max_latency=0.25)
+    older.restore(
+        {**estimator.to_json(), "turns": [t for t in estimator.to_json()["turns"] if t[1] <= 30.0]}
+    )
+    sent = stamps <= 30.0
+    mine, theirs = (
+        estimator.estimate(stamps[sent], yaw[sent]),
+        older.estimate(stamps[sent], yaw[sent]),
+    )
+    assert mine is not None
+    assert theirs is not None
+    assert (mine.latency, mine.sd) == (theirs.latency, theirs.sd)
+    assert mine.latency == pytest.approx(0.08, abs=0.01)
+
+
+def test_turns_that_fit_two_latencies_say_neither() -> None:
+    """A robot that turns back and forth with one period: its turns match the source's shifted
+    by a whole period as well as unshifted, and the estimate says nothing rather than pick."""
+    rng = np.random.default_rng(2)
+    estimator = LatencyEstimator(max_latency=0.25)
+    period = 0.2  # s: 20 ms late fits as well as 180 ms early, both within what is looked for
+    for t in np.arange(0.0, 40.0, 1.0 / 30.0):
+        yaw = 0.1 * math.sin(2 * math.pi * t / period)
+        estimator.add(float(t), lines_at(yaw, rng, math.radians(0.05)))
+    stamps = np.arange(-1.0, 41.0, 0.01)
+    assert estimator.estimate(stamps, 0.1 * np.sin(2 * np.pi * (stamps - 0.02) / period)) is None

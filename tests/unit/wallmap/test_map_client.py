@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from wallmap.common.map_records import MapReply, WallRecord
-from wallmap.map_client import format_table
+from wallmap.map_client import describe_pose_source, format_table
 
 
 def _wall(wall_id: int) -> WallRecord:
@@ -34,3 +34,22 @@ def test_one_wall_is_one_row_under_the_header() -> None:
 def test_no_wall_is_said_without_an_empty_table() -> None:
     text = format_table(MapReply(frames=58, observations=0))
     assert text == "0 walls from 58 frames and 0 observations (frame map)"
+
+
+def test_the_pose_line_says_whether_the_latency_was_estimated_given_or_guessed() -> None:
+    found = {
+        "latency_s": 0.0234,
+        "latency_fixed": False,
+        "settled": True,
+        "position_sd_m": 0.002,
+        "heading_sd_deg": 1.31,
+        "frames_corrected": 350,
+        "frames_recovered": 0,
+        "frames_refused": 0,
+        "frames_unjudged": 64,
+    }
+    assert "latency +23 ms (estimated)" in describe_pose_source(found)
+    guessed = describe_pose_source({**found, "latency_s": 0.0, "settled": False})
+    assert "latency +0 ms (not yet estimated: the guess)" in guessed
+    given = describe_pose_source({**found, "latency_s": -0.03, "latency_fixed": True})
+    assert "latency -30 ms (given)" in given

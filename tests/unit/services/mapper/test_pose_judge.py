@@ -231,3 +231,37 @@ def test_after_the_source_jumps_a_frame_no_wall_can_check_starts_none_for_a_whil
     later = judge.judge(_frame(11.3, true, far), _source(11.3, true), wall_map, None)
     assert (soon.kind, soon.start_walls) == ("unjudged", False)
     assert (later.kind, later.start_walls) == ("unjudged", True)
+
+
+def test_a_source_ahead_of_the_frames_by_more_or_less_is_judged_the_same() -> None:
+    """How many poses have come beyond a frame's is a matter of timing (how far ahead of the
+    frames the source runs): a run judged with all of them sent at once, and with each sent
+    only just in time, gives the same latency and the same poses."""
+    rate, late = 20.0, 0.05
+    stamps = np.arange(0.0, 20.0, 1.0 / rate)
+    turn = 0.4 * np.sin(stamps / 1.3) + 0.2 * np.sin(stamps * 1.7)
+
+    def truth(t: float) -> np.ndarray:
+        return np.array([0.1 * math.cos(t), 0.1 * math.sin(t), float(np.interp(t, stamps, turn))])
+
+    sent = [Pose(t + late, *map(float, truth(t))) for t in np.arange(-1.0, 21.0, 0.01)]
+    ahead, in_time = PoseBuffer(), PoseBuffer()
+    for pose in sent:
+        ahead.add(pose)
+    judges = PoseJudge(JudgeConfig()), PoseJudge(JudgeConfig())
+    maps = WallMap(), WallMap()
+    waiting = iter(sent)
+    for t in map(float, stamps):
+        frame = _frame(t, truth(t))
+        while not isinstance(in_time.sample(judges[1].source_stamp(t)), SourcePose):
+            in_time.add(next(waiting))  # the pose after the frame's has just come
+        verdicts = []
+        for judge, wall_map, buffer in zip(judges, maps, (ahead, in_time), strict=True):
+            source = buffer.sample(judge.source_stamp(t))
+            assert isinstance(source, SourcePose)
+            verdicts.append(judge.judge(frame, source, wall_map, buffer))
+            wall_map.integrate(frame, verdicts[-1].pose)
+        assert judges[0].summary() == judges[1].summary()
+        assert np.array_equal(verdicts[0].pose.vector, verdicts[1].pose.vector)
+    assert judges[0].settled
+    assert judges[0].latency == pytest.approx(late, abs=0.01)

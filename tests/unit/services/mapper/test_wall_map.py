@@ -10,7 +10,7 @@ from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import serving, state_file
 from wallmap.services.mapper.map_config import MapperConfig
-from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer
+from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, SourcePose
 from wallmap.services.mapper.wall_map import WallMap
 
 # A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
@@ -173,6 +173,10 @@ def test_pose_buffer_interpolates_waits_and_refuses():
     assert mid.x == pytest.approx(1.0)
     assert abs(abs(mid.yaw) - np.pi) < 1e-9  # through +-pi, not through 0
     assert buf.lookup(1.2).x == 2.0
+    assert buf.lookup(1.21) is Lookup.WAIT, "the next pose, when it comes, decides"
+    carried = buf.sample(1.21, extrapolate=0.02)
+    assert isinstance(carried, SourcePose)
+    assert carried.pose.x == pytest.approx(2.1)
     assert buf.lookup(1.3) is Lookup.WAIT
     assert buf.lookup(0.5) is Lookup.MISSING
     buf.add(Pose(3.0, 9.0, 0.0, 0.0))  # a gap of 1.8 s: not interpolated across
