@@ -121,7 +121,9 @@ def run_scene(
             details = _describe(score, info.plan, info.seen_counts)
             path = info.trajectory.positions
             room_score = (
-                evaluate_rooms(rooms(pipeline).to_map(), info.plan, path)
+                evaluate_rooms(
+                    rooms(pipeline).to_map(), info.plan, path, pipeline.mapping.rooms.free
+                )
                 if info.plan.rooms
                 else None
             )
@@ -165,6 +167,9 @@ ROOMS_HEADER = """\
 Rooms and doors (docs/rooms.md), for the scenes with room truth, pooled over the seeds:
   entered    rooms the robot entered (its path passes inside) found / entered
   IoU        of each entered room with the room it is matched to (0 if none): min, median
+  seen       of each entered room's floor, the share within 0.3 m of floor the sensor saw free
+             (rooms are made of seen floor, an open room's filled out up to 1.5 m towards the
+             walls it faces: a room seen in part is served in part): min, median
   false      served rooms matching no true room; split: a second served room over one
   doors      true doors between entered rooms found (centre within 0.5 m) / such doors;
              joined: of those, joining the right rooms; centre, width: the largest errors, m"""
@@ -174,12 +179,15 @@ def rooms_row(kind: str, poses: str, results: Sequence[Result]) -> str:
     """A markdown table row of the rooms and doors of one (scene kind, pose source)."""
     scores = [r.rooms for r in results if r.rooms is not None]
     ious = [v for s in scores for v in s.entered_ious]
+    seen = [v for s in scores for v in s.seen.values()]
     cells = [
         kind,
         poses,
         f"{sum(v > 0 for v in ious)}/{len(ious)}",
         f"{min(ious, default=math.nan):.2f}",
         f"{_median(ious):.2f}",
+        f"{min(seen, default=math.nan):.2f}",
+        f"{_median(seen):.2f}",
         str(sum(s.false for s in scores)),
         str(sum(s.split for s in scores)),
         f"{sum(s.doors_found for s in scores)}/{sum(s.truth_doors for s in scores)}",
@@ -278,7 +286,8 @@ def main() -> None:
     if with_rooms:
         print(f"\n{ROOMS_HEADER}\n")
         columns = (
-            "entered | IoU min | IoU median | false | split | doors | joined | centre m | width m"
+            "entered | IoU min | IoU median | seen min | seen median | false | split | doors | "
+            "joined | centre m | width m"
         )
         print_table(columns, with_rooms, poses, results, rooms_row)
     if args.details:

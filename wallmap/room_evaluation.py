@@ -8,6 +8,11 @@ robot entered (its path passes inside them) and the doors between two of them: a
 through its door may be served, or not, and a door into nothing seen is not asked for. Doors are
 matched by centre, within 0.5 m; a matched door joins the right rooms when its rooms are the
 matches of the truth's.
+
+Given the floor the mapper saw (its ``FreeSpace``), each entered room's ``seen`` share says how
+much of its floor lies within ``SEEN_REACH`` of floor seen free. Rooms are made of seen floor
+(an open room's filled out a little towards the walls it faces), so a room seen in part is
+served in part: a low IoU with a low share is the drive's, not the segmentation's.
 """
 
 from __future__ import annotations
@@ -20,12 +25,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wallmap.common.free_space import FreeSpace
 from wallmap.common.grid_labels import inside_polygon
 from wallmap.scene.floorplan import Door, FloorPlan
 
 STEP = 0.05  # m: the grid outlines are compared on
 MATCH_IOU = 0.3
 DOOR_REACH = 0.5  # m
+# m: floor this near floor seen free counts as seen (free rays stop 0.2 m short of their wall)
+SEEN_REACH = 0.3
 
 
 def _grid(polygons: Iterable[np.ndarray]) -> np.ndarray:
@@ -47,6 +55,28 @@ def _share_of(a: np.ndarray, b: np.ndarray) -> float:
     grid = _grid([a, b])
     in_a = inside_polygon(grid, a)
     return float((in_a & inside_polygon(grid, b)).sum() / max(int(in_a.sum()), 1))
+
+
+def seen_share(polygon: np.ndarray, free: FreeSpace) -> float:
+    """How much of a room's floor (polygon (n, 2)) lies near floor seen free.
+
+    On the 5 cm grid, within ``SEEN_REACH`` (a square of cells) of a free cell.
+    """
+    points = _grid([polygon])
+    points = points[inside_polygon(points, polygon)]
+    if not len(points) or not free.counts.size:
+        return 0.0
+    reach = int(np.ceil(SEEN_REACH / free.cell - 1e-9))
+    seen = np.pad(free.free(), reach + 1).astype(np.int32)
+    summed = seen.cumsum(axis=0).cumsum(axis=1)  # a box's count is four lookups
+    cells = np.floor(points / free.cell).astype(np.int64) - free.origin + reach + 1
+    i, j = cells.T
+    inside = (i >= reach + 1) & (j >= reach + 1) & (i < seen.shape[0] - reach - 1)
+    inside &= j < seen.shape[1] - reach - 1
+    i, j = i[inside], j[inside]
+    lo_i, hi_i, lo_j, hi_j = i - reach - 1, i + reach, j - reach - 1, j + reach
+    box = summed[hi_i, hi_j] - summed[lo_i, hi_j] - summed[hi_i, lo_j] + summed[lo_i, lo_j]
+    return float((box > 0).sum() / len(points))
 
 
 def entered(plan: FloorPlan, path: ArrayLike | None) -> frozenset[int]:
@@ -75,6 +105,7 @@ class RoomScore:
     doors_joined: int  # of those found, joining the right rooms
     centre_err: float  # m, the largest of the doors found
     width_err: float  # m, likewise
+    seen: dict[int, float]  # entered truth room id -> its seen share (empty: no floor given)
 
     @property
     def false(self) -> int:
@@ -93,6 +124,9 @@ class RoomScore:
         ious = (
             f"IoU min {min(values):.2f}, median {statistics.median(values):.2f}" if values else "-"
         )
+        if self.seen:
+            shares = list(self.seen.values())
+            ious += f"; floor seen min {min(shares):.2f}, median {statistics.median(shares):.2f}"
         return (
             f"rooms entered {found} of {len(values)} found ({ious}), {self.false} false, "
             f"{self.split} split, {self.rooms} served; doors between them {self.doors_found} "
@@ -102,11 +136,15 @@ class RoomScore:
 
 
 def evaluate_rooms(
-    body: dict[str, Any], plan: FloorPlan, path: ArrayLike | None = None
+    body: dict[str, Any],
+    plan: FloorPlan,
+    path: ArrayLike | None = None,
+    free: FreeSpace | None = None,
 ) -> RoomScore:
     """The mapper's rooms reply (the contract's payload) against the plan's truth.
 
     ``path``: the robot's positions (n, 2), which say the rooms it entered (None: all).
+    ``free``: the floor the mapper saw, for each entered room's seen share.
     """
     served = {r["id"]: np.asarray(r["polygon"], dtype=float) for r in body["rooms"]}
     truth = {t.id: np.asarray(t.polygon, dtype=float) for t in plan.rooms}
@@ -140,6 +178,7 @@ def evaluate_rooms(
         doors_joined=joined,
         centre_err=centre,
         width_err=width,
+        seen={} if free is None else {t: seen_share(truth[t], free) for t in sorted(inside)},
     )
 
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from wallmap.room_evaluation import evaluate_rooms, iou
+from wallmap.common.free_space import MIN_FREE, FreeSpace
+from wallmap.room_evaluation import evaluate_rooms, iou, seen_share
 from wallmap.scene.floorplan import Door, FloorPlan, Room
 
 SQUARE = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
@@ -67,3 +69,17 @@ def test_only_the_rooms_the_robot_entered_and_the_doors_between_them_are_asked_f
     walked = evaluate_rooms(body, PLAN, [[1.0, 1.0], [6.0, 2.0]])
     assert walked.entered_ious == [pytest.approx(1.0, abs=0.02), 0.0]
     assert (walked.truth_doors, walked.doors_found) == (1, 0)
+
+
+def test_the_seen_share_is_of_the_floor_near_floor_seen_free() -> None:
+    """A robot that saw the left half of the first room: that half and 0.3 m past it count,
+    the other room not at all."""
+    free = FreeSpace()
+    xs, ys = np.meshgrid(np.arange(0.05, 2.0, 0.1), np.arange(0.05, 4.0, 0.1))
+    free.add_points(np.repeat(np.stack([xs.ravel(), ys.ravel()], axis=1), MIN_FREE, axis=0))
+    assert seen_share(np.array(SQUARE), free) == pytest.approx(2.3 / 4.0, abs=0.02)
+    assert seen_share(np.array(NEXT), free) == 0.0
+    score = evaluate_rooms({"rooms": [], "doors": []}, PLAN, [[1.0, 1.0]], free)
+    assert score.seen == {0: pytest.approx(0.575, abs=0.02)}
+    assert f"floor seen min {score.seen[0]:.2f}" in score.summary()
+    assert evaluate_rooms({"rooms": [], "doors": []}, PLAN, [[1.0, 1.0]]).seen == {}
