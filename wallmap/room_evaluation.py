@@ -57,22 +57,32 @@ def _share_of(a: np.ndarray, b: np.ndarray) -> float:
     return float((in_a & inside_polygon(grid, b)).sum() / max(int(in_a.sum()), 1))
 
 
-def seen_share(polygon: np.ndarray, free: FreeSpace) -> float:
-    """How much of a room's floor (polygon (n, 2)) lies near floor seen free.
+def seen_shares(polygons: dict[int, np.ndarray], free: FreeSpace) -> dict[int, float]:
+    """How much of each room's floor (polygon (n, 2)) lies near floor seen free.
 
-    On the 5 cm grid, within ``SEEN_REACH`` (a square of cells) of a free cell.
+    On the 5 cm grid, within ``SEEN_REACH`` (a square of cells) of a free cell: the free grid's
+    box sums are counted once, for every room.
     """
+    reach = int(np.ceil(SEEN_REACH / free.cell - 1e-9))
+    pad = reach + 1
+    summed = np.pad(free.free(), pad).astype(np.int32).cumsum(axis=0).cumsum(axis=1)
+    return {
+        k: _near_seen(polygon, free.origin, free.cell, summed, reach)
+        for k, polygon in polygons.items()
+    }
+
+
+def _near_seen(
+    polygon: np.ndarray, origin: np.ndarray, cell: float, summed: np.ndarray, reach: int
+) -> float:
+    """The share of ``polygon``'s grid points with a free cell in the square around theirs."""
     points = _grid([polygon])
     points = points[inside_polygon(points, polygon)]
-    if not len(points) or not free.counts.size:
+    if not len(points):
         return 0.0
-    reach = int(np.ceil(SEEN_REACH / free.cell - 1e-9))
-    seen = np.pad(free.free(), reach + 1).astype(np.int32)
-    summed = seen.cumsum(axis=0).cumsum(axis=1)  # a box's count is four lookups
-    cells = np.floor(points / free.cell).astype(np.int64) - free.origin + reach + 1
-    i, j = cells.T
-    inside = (i >= reach + 1) & (j >= reach + 1) & (i < seen.shape[0] - reach - 1)
-    inside &= j < seen.shape[1] - reach - 1
+    i, j = (np.floor(points / cell).astype(np.int64) - origin + reach + 1).T
+    inside = (i > reach) & (j > reach) & (i < summed.shape[0] - reach - 1)
+    inside &= j < summed.shape[1] - reach - 1
     i, j = i[inside], j[inside]
     lo_i, hi_i, lo_j, hi_j = i - reach - 1, i + reach, j - reach - 1, j + reach
     box = summed[hi_i, hi_j] - summed[lo_i, hi_j] - summed[hi_i, lo_j] + summed[lo_i, lo_j]
@@ -178,7 +188,7 @@ def evaluate_rooms(
         doors_joined=joined,
         centre_err=centre,
         width_err=width,
-        seen={} if free is None else {t: seen_share(truth[t], free) for t in sorted(inside)},
+        seen={} if free is None else seen_shares({t: truth[t] for t in sorted(inside)}, free),
     )
 
 

@@ -71,8 +71,9 @@ class MapperCore:
         """The source's pose for the instant ``stamp``, at the stamp its latency says.
 
         A latency estimate may ask for a pose the source has not sent (yet, or ever, at the
-        end of a run): after LATENCY_WAIT the newest pose is carried on to it, up to the
-        lookahead the judge allows. Call with the lock held.
+        end of a run), and a stamp past the newest pose waits for the next: after
+        LATENCY_WAIT the newest is carried on to it, up to the mapping's lookahead. Call with
+        the lock held.
         """
         mapping = self.mapping
         ahead = mapping.lookahead if waited >= LATENCY_WAIT else 0.0

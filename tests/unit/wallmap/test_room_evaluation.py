@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wallmap.common.free_space import MIN_FREE, FreeSpace
-from wallmap.room_evaluation import evaluate_rooms, iou, seen_share
+from wallmap.room_evaluation import evaluate_rooms, iou, seen_shares
 from wallmap.scene.floorplan import Door, FloorPlan, Room
 
 SQUARE = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
@@ -77,8 +77,9 @@ def test_the_seen_share_is_of_the_floor_near_floor_seen_free() -> None:
     free = FreeSpace()
     xs, ys = np.meshgrid(np.arange(0.05, 2.0, 0.1), np.arange(0.05, 4.0, 0.1))
     free.add_points(np.repeat(np.stack([xs.ravel(), ys.ravel()], axis=1), MIN_FREE, axis=0))
-    assert seen_share(np.array(SQUARE), free) == pytest.approx(2.3 / 4.0, abs=0.02)
-    assert seen_share(np.array(NEXT), free) == 0.0
+    shares = seen_shares({0: np.array(SQUARE), 1: np.array(NEXT)}, free)
+    assert shares[0] == pytest.approx(2.3 / 4.0, abs=0.02)
+    assert shares[1] == 0.0
     score = evaluate_rooms({"rooms": [], "doors": []}, PLAN, [[1.0, 1.0]], free)
     assert score.seen == {0: pytest.approx(0.575, abs=0.02)}
     assert f"floor seen min {score.seen[0]:.2f}" in score.summary()
