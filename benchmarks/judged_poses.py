@@ -77,7 +77,7 @@ def _mapper_step(pipeline: Pipeline, frame: Frame, mapper_ms: list[float]) -> No
     observations = pipeline.detector.detect(frame)
     start = time.perf_counter()
     mapping = pipeline.mapping
-    source = pipeline.poses.sample(mapping.source_stamp(frame.stamp), extrapolate=mapping.lookahead)
+    source = mapping.source_pose(frame.stamp)
     if not isinstance(source, Lookup):
         mapping.integrate(observations, source)
     mapper_ms.append(1e3 * (time.perf_counter() - start))

@@ -86,7 +86,7 @@ class Pipeline:
         if pose is not None:
             self.poses.add(pose)
         mapping = self.mapping
-        source = self.poses.sample(mapping.source_stamp(frame.stamp), extrapolate=mapping.lookahead)
+        source = mapping.source_pose(frame.stamp)
         if isinstance(source, Lookup):
             return None
         observations = self.detector.detect(frame)

@@ -75,9 +75,7 @@ class MapperCore:
         LATENCY_WAIT the newest is carried on to it, up to the mapping's lookahead. Call with
         the lock held.
         """
-        mapping = self.mapping
-        ahead = mapping.lookahead if waited >= LATENCY_WAIT else 0.0
-        return self.poses.sample(mapping.source_stamp(stamp), extrapolate=ahead)
+        return self.mapping.source_pose(stamp, carry=waited >= LATENCY_WAIT)
 
     def reply(self, query: MapQuery, fmt: str) -> bytes:
         """The encoded map reply plus the mapper's counters, built once per map state.

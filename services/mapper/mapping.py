@@ -64,6 +64,15 @@ class Mapping:
         """The stamp of the source's pose that describes the instant ``stamp``."""
         return self.judge.source_stamp(stamp) if self.judge is not None else stamp + self.latency
 
+    def source_pose(self, stamp: float, *, carry: bool = True) -> SourcePose | Lookup:
+        """The source's pose for the instant ``stamp``, at the stamp its latency says.
+
+        ``carry``: past the newest pose, carry it on by up to ``lookahead`` (a frame that has
+        waited for the next pose long enough, or one mapped offline); else wait for the next.
+        """
+        ahead = self.lookahead if carry else 0.0
+        return self.poses.sample(self.source_stamp(stamp), extrapolate=ahead)
+
     def integrate(self, observations: Observations, source: SourcePose) -> Pose | None:
         """Fold a frame's observations in; the pose they were mapped from (None: refused).
 
@@ -97,9 +106,7 @@ class Mapping:
         self.map.removed = set(old.walls) | old.removed
         self.judge.restart()
         for observations in early:
-            source = self.poses.sample(
-                self.source_stamp(observations.stamp), extrapolate=self.lookahead
-            )
+            source = self.source_pose(observations.stamp)
             if isinstance(source, Lookup):
                 self.map.skip_frame(observations)
             else:
