@@ -505,7 +505,11 @@ def find_rooms(
     barrier = base.copy()
     _draw_spans(grid, barrier, dividers, radius)
     labels, rooms = _regions(grid, barrier, config)
-    kept = [d for d in dividers if _divides(grid, labels, d, radius)]
+    kept = [
+        d
+        for d in dividers
+        if _divides(grid, labels, d, radius, ends, config.door_min, config.door_max)
+    ]
     if len(kept) < len(dividers):  # one that divides no two rooms is no divider: without it
         barrier = base
         _draw_spans(grid, barrier, kept, radius)
@@ -528,11 +532,48 @@ def _draw_spans(
     grid.draw(barrier, np.array([o.p0 for o in spans]), np.array([o.p1 for o in spans]), radius)
 
 
-def _divides(grid: _Grid, labels: NDArray[np.int32], span: Opening, radius: float) -> bool:
-    """Whether the door part of a divider's span has two different rooms on its two sides."""
+def _divides(
+    grid: _Grid,
+    labels: NDArray[np.int32],
+    span: Opening,
+    radius: float,
+    ends: _Ends,
+    door_min: float,
+    door_max: float,
+) -> bool:
+    """Whether the door part of a divider's span leads from a room to another space.
+
+    Another room on its other side; or, where the span goes on along a line of wall (its far
+    end's wall within ``GAP_ANGLE`` of it: a side room's door and glass beside it) and its
+    door is a door's width, floor seen beyond it that makes no room. That is a glimpse
+    through the door, too little to serve, which leaks to unexplored space round the walls
+    the map lacks; without the divider it joins the room. A span whose far end meets a wall
+    across it cuts off a corner of the room, and what is seen beyond it there is the room's
+    own floor before glass; a sliver crossed between two pieces of a wall mapped a little
+    apart (poses that drift) is no door.
+    """
     p0, p1 = span.door or (span.p0, span.p1)
-    (sides,), _, _ = _sides(grid, labels, p0[None], p1[None], radius)
-    return min(sides) >= 0 and sides[0] != sides[1]
+    (sides,), along, normal = _sides(grid, labels, p0[None], p1[None], radius)
+    if max(sides) < 0 or sides[0] == sides[1]:
+        return False
+    if min(sides) >= 0:
+        return True
+    if not door_min <= float(np.hypot(*(p1 - p0))) <= door_max:
+        return False
+    towards_none = normal if sides[0] < 0 else -normal
+    beyond = along + (radius + 2.5 * grid.cell) * towards_none[:, None]
+    return _goes_on_along(ends, span) and bool(_free_near(grid, beyond)[0])
+
+
+def _goes_on_along(ends: _Ends, span: Opening) -> bool:
+    """Whether the span goes on along a line of wall: a wall at its far end within ``GAP_ANGLE``."""
+    _, s = _near(span.p1[None], ends.a, ends.b, 0.05)
+    direction = (span.p1 - span.p0) / max(span.width, 1e-12)
+    seg = ends.b[s] - ends.a[s]
+    length = np.maximum(np.hypot(seg[:, 0], seg[:, 1]), 1e-12)
+    near = np.hypot(*(_foot(span.p1[None], ends.a[s], ends.b[s]) - span.p1).T) < 0.05
+    along = np.abs(seg @ direction) / length >= math.cos(math.radians(GAP_ANGLE))
+    return bool((near & along).any())
 
 
 def _divider_spans(

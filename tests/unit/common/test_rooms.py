@@ -11,7 +11,15 @@ import pytest
 
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.grid_labels import inside_polygon
-from wallmap.common.rooms import WallSegments, _crossing, find_rooms
+from wallmap.common.rooms import (
+    Opening,
+    RoomsConfig,
+    WallSegments,
+    _crossing,
+    _free_ends,
+    _goes_on_along,
+    find_rooms,
+)
 from wallmap.room_evaluation import iou
 from wallmap.scene.floorplan import FloorPlan, Wall, free_rays, generate_floorplan, smooth_route
 
@@ -205,3 +213,70 @@ def test_a_side_rooms_wall_at_its_door_does_not_cut_the_corridor() -> None:
     corridor = [r for r in layout.rooms if inside_polygon(ends, r.polygon).any()]
     assert len(corridor) == 1, "one corridor, not cut at the side room's wall"
     assert inside_polygon(ends, corridor[0].polygon).all()
+
+
+CORRIDOR = [(0.0, 0.05), (6.8, 0.05), (10.4, -1.63), (12.0, 2.0), (0.0, 2.0)]
+
+
+def _corridor_with_a_closet(door: float = 1.0) -> tuple[FloorPlan, list[Wall]]:
+    """A corridor 2 m wide, its right wall kinked by 25 degrees 6.8 m along; in that wall a
+    ``door`` wide opening from x = 4 into a 1.5 x 1.5 m closet, then glass to the kink. The closet's walls
+    return depth, but the map lacks them (seen only through the door), as it lacks the glass:
+    the plan and the walls mapped. The right wall runs down the middle of a row of cells
+    (``_two_rooms``)."""
+    mapped = [
+        Wall(0, (0.0, 0.05), (4.0, 0.05)),
+        Wall(1, CORRIDOR[1], CORRIDOR[2]),
+        Wall(2, CORRIDOR[2], CORRIDOR[3]),
+        Wall(3, CORRIDOR[3], CORRIDOR[4]),
+        Wall(4, CORRIDOR[4], CORRIDOR[0]),
+    ]
+    closet = [
+        Wall(5, (4.0, 0.05), (4.0, -1.45)),
+        Wall(6, (4.0, -1.45), (5.5, -1.45)),
+        Wall(7, (5.5, -1.45), (5.5, 0.05)),
+    ]
+    glass = Wall(8, (4.0 + door, 0.05), CORRIDOR[1], glass=True)
+    return FloorPlan(walls=(*mapped, *closet, glass)), mapped
+
+
+def test_a_door_beside_glass_into_a_glimpse_keeps_the_glimpse_out_of_the_corridor() -> None:
+    """The span from the door's jamb along the glass to the kink (2.8 m) is door and glass in
+    one, and the corridor's wall goes on past it at 25 degrees: too far off the span's line
+    for a passage between two pieces of one wall. Beyond the door, floor seen through it that
+    makes no room (under 2.5 m^2), round whose walls the space leaks. The span divides: the
+    corridor is closed, the closet not in it, and the door leads to unexplored space."""
+    plan, mapped = _corridor_with_a_closet()
+    route = np.array([[0.6 + 0.1 * k, 1.0] for k in range(100)])
+    layout = find_rooms(_walls(mapped), _seen(plan, route))
+    (corridor,) = layout.rooms
+    assert corridor.closed
+    assert iou(corridor.polygon, np.array(CORRIDOR)) >= 0.95
+    assert not inside_polygon(np.array([[4.75, -0.7]]), corridor.polygon).any()
+    (door,) = layout.doors
+    assert door.rooms == (0,), "it leads to unexplored space"
+    assert np.mean([door.p0, door.p1], axis=0) == pytest.approx([4.5, 0.05], abs=0.2)
+    assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(1.0, abs=0.3)
+
+
+def test_a_crossing_narrower_than_a_door_beside_glass_is_no_door() -> None:
+    """The same corridor with a 0.45 m slot for a door: under ``door_min``, no door. (With
+    drifting poses two pieces of one wall can be mapped apart so that a span between them is
+    crossed over such a sliver.)"""
+    plan, mapped = _corridor_with_a_closet(door=0.45)
+    route = np.array([[0.6 + 0.1 * k, 1.0] for k in range(100)])
+    layout = find_rooms(_walls(mapped), _seen(plan, route))
+    assert all(np.hypot(*(d.p1 - d.p0)) >= RoomsConfig().door_min for d in layout.doors)
+
+
+def test_only_a_span_going_on_along_a_wall_may_lead_into_a_glimpse() -> None:
+    """The corridor's span above meets its wall going on at 25 degrees. One cutting a room's
+    corner (window scene, seed 500: from a side wall's end where glass begins, to the end of
+    the wall across the room) meets that wall at 77 degrees: what is seen beyond it is the
+    room's own floor before the glass, not a space beyond a door."""
+    _, mapped = _corridor_with_a_closet()
+    ends = _free_ends(_walls(mapped), RoomsConfig().joint, 4.0)
+    assert _goes_on_along(ends, Opening(0, np.array([4.0, 0.05]), np.array(CORRIDOR[1])))
+    room = [Wall(0, (0.0, 0.0), (0.0, 2.0)), Wall(1, (0.7, 5.0), (8.0, 5.0))]
+    ends = _free_ends(_walls(room), RoomsConfig().joint, 4.0)
+    assert not _goes_on_along(ends, Opening(0, np.array([0.0, 2.0]), np.array([0.7, 5.0])))
