@@ -79,6 +79,7 @@ class RoomsConfig:
         blind_angle: how far (deg) such a span may turn from its wall's direction.
         blind_seen: share of a span's cells seen free beyond which it is a passage, not glass.
         divider_min: shortest piece of wall (m) whose end may start a divider's span.
+        divider_max: longest divider's span (m): a passage and the unmapped wall beside it.
     """
 
     door_min: float = 0.6
@@ -97,6 +98,7 @@ class RoomsConfig:
     blind_angle: float = 60.0
     blind_seen: float = 0.1
     divider_min: float = 1.0
+    divider_max: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -493,17 +495,17 @@ def find_rooms(
     if not grid.free.any():
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
-    base = np.zeros(grid.shape, dtype=bool)
+    drawn = np.zeros(grid.shape, dtype=bool)
     ends = _free_ends(
-        walls, config.joint, max(config.door_max, config.passage_max, config.blind_max)
+        walls,
+        config.joint,
+        max(config.door_max, config.passage_max, config.divider_max, config.blind_max),
     )
-    grid.draw(base, ends.a, ends.b, radius)
+    grid.draw(drawn, ends.a, ends.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
     dividers = _divider_spans(grid, ends, spans, config)
-    _draw_spans(grid, base, [*spans, *_blind_spans(grid, ends, spans + dividers, config)], radius)
-    barrier = base.copy()
-    _draw_spans(grid, barrier, dividers, radius)
+    barrier = _barrier(grid, drawn, ends, spans, dividers, config, radius)
     labels, rooms = _regions(grid, barrier, config)
     kept = [
         d
@@ -511,8 +513,7 @@ def find_rooms(
         if _divides(grid, labels, d, radius, ends, config.door_min, config.door_max)
     ]
     if len(kept) < len(dividers):  # one that divides no two rooms is no divider: without it
-        barrier = base
-        _draw_spans(grid, barrier, kept, radius)
+        barrier = _barrier(grid, drawn, ends, spans, kept, config, radius)
         labels, rooms = _regions(grid, barrier, config)
     spans += kept
     for k, closed in enumerate(rooms):
@@ -523,6 +524,26 @@ def find_rooms(
     _bounding_walls(grid, labels, walls, shapes, radius)
     doors = _doors(grid, labels, [s for s in spans if s.width >= config.door_min], radius)
     return Layout(shapes, doors)
+
+
+def _barrier(
+    grid: _Grid,
+    walls: NDArray[np.bool_],
+    ends: _Ends,
+    spans: list[Opening],
+    dividers: list[Opening],
+    config: RoomsConfig,
+    radius: float,
+) -> NDArray[np.bool_]:
+    """The walls drawn (``walls``) with the spans, the dividers and the blind spans closed.
+
+    An end a divider starts from is the divider's; once the divider is dropped (it divides
+    nothing), the end is open again, and what nothing was seen through from it is glass.
+    """
+    barrier = walls.copy()
+    blind = _blind_spans(grid, ends, spans + dividers, config)
+    _draw_spans(grid, barrier, [*spans, *dividers, *blind], radius)
+    return barrier
 
 
 def _draw_spans(
@@ -582,23 +603,28 @@ def _divider_spans(
     """Dividers whose piece beyond the door was never mapped: door and unseen wall in one span.
 
     From an end left open, along its wall (``passage_angle``) to another wall, ``door_max`` to
-    ``passage_max`` long, from a piece of wall ``divider_min`` long or more: a door candidate
+    ``divider_max`` long, from a piece of wall ``divider_min`` long or more: a door candidate
     when the robot or its rays crossed part of it and an end of it, ``door_min`` or more, was
-    never seen (``door_span`` finds the door). A span seen free all along is open floor, not
-    a divider, and stays open. Whether it divides two rooms is known only once the floor is
-    divided (``find_rooms`` keeps those that do).
+    never seen (``door_span`` finds the door, at most ``passage_max`` wide). A span longer
+    than ``passage_max`` (an open-plan passage and glass beside it) must have its door by
+    the end it starts from: one crossed at its far end only, from a piece of wall across
+    the room, cuts a corner off a room whose walls there are glass. A span seen free all
+    along is open floor, not a divider, and stays open. Whether it divides two rooms is
+    known only once the floor is divided (``find_rooms`` keeps those that do).
     """
     used = _ends_of(spans)
     length = np.hypot(*(ends.b - ends.a).T)
     found = []
-    for span in openings(ends, config, config.passage_max, config.passage_angle):
+    for span in openings(ends, config, config.divider_max, config.passage_angle):
         if _end_key(span.p0) in used or span.width <= config.door_max:
             continue
         k = int(np.argmin(np.hypot(*(ends.point - span.p0).T)))  # the end it starts from
         if length[ends.piece[k]] < config.divider_min:
             continue  # a pillar's face, a cupboard's side: no divider
         door = door_span(grid, span, config.door_min)
-        if float(np.hypot(*(door[1] - door[0]))) < span.width - config.door_min / 2:
+        width = float(np.hypot(*(door[1] - door[0])))
+        beside = span.width <= config.passage_max or bool(np.all(door[0] == span.p0))
+        if width < span.width - config.door_min / 2 and width <= config.passage_max and beside:
             found.append(dataclasses.replace(span, door=door))
             used |= _ends_of([span])
     return found

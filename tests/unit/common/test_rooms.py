@@ -110,13 +110,13 @@ def test_an_open_plan_passage_wider_than_a_door_is_a_door_between_two_rooms() ->
     assert door.rooms == (0, 1)
 
 
-def _two_rooms(divider: list[Wall]) -> list[Wall]:
-    """Two 6 x 4 m rooms side by side (x from 0 to 12.1), divided at x = 6.05 by ``divider``.
+def _two_rooms(divider: list[Wall], height: float = 4.0) -> list[Wall]:
+    """Two 6 m rooms ``height`` deep side by side (x 0-12.1), divided at x = 6.05 by ``divider``.
 
     The divider runs down the middle of a column of cells, as a wall seldom lies on a cell's
     edge: floor right beside it, seen by rays along it, is then not the divider's own cells.
     """
-    corners = [(0.0, 0.0), (12.1, 0.0), (12.1, 4.0), (0.0, 4.0)]
+    corners = [(0.0, 0.0), (12.1, 0.0), (12.1, height), (0.0, height)]
     sides = zip(corners, corners[1:] + corners[:1], strict=True)
     return [Wall(k, p, q) for k, (p, q) in enumerate(sides)] + divider
 
@@ -144,6 +144,21 @@ def test_a_divider_glass_beyond_its_door_divides_and_the_door_is_where_the_robot
     (door,) = layout.doors
     assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(1.0, abs=0.2)
     assert np.mean([door.p0, door.p1], axis=0) == pytest.approx([6.05, 1.5], abs=0.15)
+
+
+def test_an_open_plan_passage_with_glass_beside_it_divides_two_rooms() -> None:
+    """5.1 m deep rooms; the divider solid for 1 m, open for 2.8 m, then 1.3 m of glass: a
+    span of 4.1 m from the solid piece's end, longer than a passage, its door by that end."""
+    solid = Wall(4, (6.05, 0.0), (6.05, 1.0))
+    glass = Wall(5, (6.05, 3.8), (6.05, 5.1), glass=True)
+    plan = FloorPlan(walls=tuple(_two_rooms([solid, glass], height=5.1)))
+    mapped = [w for w in plan.walls if not w.glass]
+    layout = find_rooms(_walls(mapped), _seen(plan, _through_the_door(2.4)))
+    assert sorted(round(room.area) for room in layout.rooms) == [31, 31]
+    (door,) = layout.doors
+    assert door.rooms == (0, 1)
+    assert min(door.p0[1], door.p1[1]) == pytest.approx(1.0, abs=0.1), "from the solid piece"
+    assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(2.8, abs=0.3)
 
 
 def test_a_span_seen_free_all_along_or_from_a_short_stub_divides_nothing() -> None:
@@ -220,10 +235,10 @@ CORRIDOR = [(0.0, 0.05), (6.8, 0.05), (10.4, -1.63), (12.0, 2.0), (0.0, 2.0)]
 
 def _corridor_with_a_closet(door: float = 1.0) -> tuple[FloorPlan, list[Wall]]:
     """A corridor 2 m wide, its right wall kinked by 25 degrees 6.8 m along; in that wall a
-    ``door`` wide opening from x = 4 into a 1.5 x 1.5 m closet, then glass to the kink. The closet's walls
-    return depth, but the map lacks them (seen only through the door), as it lacks the glass:
-    the plan and the walls mapped. The right wall runs down the middle of a row of cells
-    (``_two_rooms``)."""
+    ``door`` wide opening from x = 4 into a 1.5 x 1.5 m closet, then glass to the kink. The
+    closet's walls return depth, but the map lacks them (seen only through the door), as it
+    lacks the glass: the plan and the walls mapped. The right wall runs down the middle of a
+    row of cells (``_two_rooms``)."""
     mapped = [
         Wall(0, (0.0, 0.05), (4.0, 0.05)),
         Wall(1, CORRIDOR[1], CORRIDOR[2]),
