@@ -507,11 +507,7 @@ def find_rooms(
     dividers = _divider_spans(grid, ends, spans, config)
     barrier = _barrier(grid, drawn, ends, spans, dividers, config, radius)
     labels, rooms = _regions(grid, barrier, config)
-    kept = [
-        d
-        for d in dividers
-        if _divides(grid, labels, d, radius, ends, config.door_min, config.door_max)
-    ]
+    kept = [d for d in dividers if _divides(grid, labels, d, radius, ends, config)]
     if len(kept) < len(dividers):  # one that divides no two rooms is no divider: without it
         barrier = _barrier(grid, drawn, ends, spans, kept, config, radius)
         labels, rooms = _regions(grid, barrier, config)
@@ -559,8 +555,7 @@ def _divides(
     span: Opening,
     radius: float,
     ends: _Ends,
-    door_min: float,
-    door_max: float,
+    config: RoomsConfig,
 ) -> bool:
     """Whether the door part of a divider's span leads from a room to another space.
 
@@ -579,7 +574,7 @@ def _divides(
         return False
     if min(sides) >= 0:
         return True
-    if not door_min <= float(np.hypot(*(p1 - p0))) <= door_max:
+    if not config.door_min <= float(np.hypot(*(p1 - p0))) <= config.door_max:
         return False
     towards_none = normal if sides[0] < 0 else -normal
     beyond = along + (radius + 2.5 * grid.cell) * towards_none[:, None]
