@@ -17,7 +17,13 @@ import numpy as np
 import pytest
 import zenoh
 
-from wallmap.common.delivery import AckWindow, StalledError, frames_in_turn
+from wallmap.common.delivery import (
+    AckWindow,
+    CatchUpInbox,
+    StalledError,
+    declare_history_publisher,
+    frames_in_turn,
+)
 from wallmap.common.link_settings import HistorySettings
 from wallmap.common.messages import Frame, Progress, pack
 from wallmap.common.runtime import Stats
@@ -75,6 +81,29 @@ def test_frames_of_a_player_that_sends_again_are_never_skipped(local) -> None:
     _put(publisher, 40, lossless=True)
     assert _take(subscriber, stats, 40) == list(range(40))
     assert "dropped" not in stats.snapshot()
+
+
+def test_a_service_catching_up_takes_the_window_before_the_live_stream() -> None:
+    """A live frame already waiting when the service asks the caches for the window comes
+    after the window's frames: a restarted detector takes them in the order they were sent."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", json.dumps([]))
+    with zenoh.open(conf) as session:
+        publisher = declare_history_publisher(session, KEY, WINDOW.samples())
+        _put(publisher, 20, lossless=False)  # sent before the service (re)started
+        subscriber = session.declare_subscriber(KEY, zenoh.handlers.FifoChannel(256))
+        points = np.zeros((1, 3, 3), np.float32)
+        publisher.put(pack(Frame("r", 20, 21.0, "cam", points, np.eye(4), "depth", False)))
+        time.sleep(0.2)  # the live frame waits in the channel
+        inbox = CatchUpInbox(subscriber.handler)
+        inbox.ask(session, KEY, WINDOW)
+        stats = Stats(logging.getLogger("test"))
+        turns = frames_in_turn(inbox, stats, WINDOW)
+        assert [next(turns).seq for _ in range(21)] == list(range(21))
+        subscriber.undeclare()
+        publisher.undeclare()
 
 
 # --- the mapper takes each run's frames once and in order -------------------------------------
