@@ -26,6 +26,14 @@ ROOT = Path(__file__).resolve().parents[1]  # the checkout
 REAL_DATA = ROOT.parent / "shared" / "data" / "real"
 
 
+def real_bag(name: str) -> Path:
+    """A recording in ``../shared/data/real/``; the test is skipped, saying so, without it."""
+    path = REAL_DATA / name
+    if not path.exists():
+        pytest.skip(f"real recording {path} is absent (shared data not mounted beside the repo)")
+    return path
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -7,12 +7,10 @@ twice, and the corridor of hallway.bag as two long parallel walls. Real services
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import zenoh
-from conftest import REAL_DATA
+from conftest import real_bag
 
 from wallmap.common.link_settings import ZenohSettings
 from wallmap.common.map_consistency import (
@@ -29,13 +27,6 @@ from wallmap.offline import scan_rows
 pytestmark = pytest.mark.e2e
 
 CORRIDOR = {"hallway.bag": True, "eng403_good.bag": False}
-
-
-def real_bag(name: str) -> Path:
-    path = REAL_DATA / name
-    if not path.exists():
-        pytest.skip(f"real recording {path} is absent (shared data not mounted beside the repo)")
-    return path
 
 
 PACES = [(name, "--fast") for name in sorted(CORRIDOR)] + [("eng403_good.bag", "--rate=4")]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 from bag_records import Record, write_records
-from conftest import REAL_DATA
+from conftest import real_bag
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.cli import main as wallmap_main
@@ -29,13 +29,6 @@ STORE.register(  # tf2's message is not among the noetic typestore's built-in ty
     get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage")
 )
 TYPES = STORE.types
-
-
-def real_bag(name: str) -> Path:
-    path = REAL_DATA / name
-    if not path.exists():
-        pytest.skip(f"real recording {path} is absent (../shared/data/real/ not mounted)")
-    return path
 
 
 def fits_one_screen(text: str) -> None:

@@ -6,20 +6,14 @@ every run: the rooms asserted are what the recording shows (docs/rooms.md has pi
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import pytest
-from conftest import REAL_DATA
+from conftest import real_bag
 
 from wallmap.config import configured
 from wallmap.offline import rooms, run_bag
 
 
 def _rooms(name: str) -> list[dict]:
-    path = Path(REAL_DATA) / name
-    if not path.exists():
-        pytest.skip(f"real recording {path} is absent (shared data not mounted beside the repo)")
-    return rooms(run_bag(path, configured("up.odometry=true"))).to_map()["rooms"]
+    return rooms(run_bag(real_bag(name), configured("up.odometry=true"))).to_map()["rooms"]
 
 
 def test_the_hallway_is_one_open_corridor_with_a_closed_niche_each_side() -> None:

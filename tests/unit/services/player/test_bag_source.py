@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 from bag_records import Record, write_records
-from conftest import REAL_DATA
+from conftest import REAL_DATA, real_bag
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
@@ -603,13 +603,6 @@ def test_unreadable_paths(tmp_path: Path) -> None:
 
 
 # --- real recordings ----------------------------------------------------------------------------
-
-
-def real_bag(name: str) -> Path:
-    path = REAL / name
-    if not path.exists():
-        pytest.skip(f"real recording {path} is absent (shared data not mounted)")
-    return path
 
 
 def test_real_hallway_laserscan_bag() -> None:
