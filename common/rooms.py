@@ -569,16 +569,16 @@ def _divides(
     apart (poses that drift) is no door.
     """
     p0, p1 = span.door or (span.p0, span.p1)
-    (sides,), along, normal = _sides(grid, labels, p0[None], p1[None], radius)
-    if max(sides) < 0 or sides[0] == sides[1]:
+    sides, along, normal = _sides(grid, labels, p0[None], p1[None], radius)
+    first, second = sides[0]
+    if max(first, second) < 0 or first == second:
         return False
-    if min(sides) >= 0:
+    if min(first, second) >= 0:
         return True
     if not config.door_min <= float(np.hypot(*(p1 - p0))) <= config.door_max:
         return False
-    towards_none = normal if sides[0] < 0 else -normal
-    beyond = along + (radius + 2.5 * grid.cell) * towards_none[:, None]
-    return _goes_on_along(ends, span) and bool(_free_near(grid, beyond)[0])
+    seen = _seen_beyond(grid, sides, along, normal, radius)
+    return _goes_on_along(ends, span) and bool(seen[0])
 
 
 def _goes_on_along(ends: _Ends, span: Opening) -> bool:
@@ -840,8 +840,7 @@ def _doors(
     sides, along, normal = _sides(grid, labels, p0, p1, radius)
     crossed = _free_near(grid, along)  # else never crossed: glass or a niche, wall for the rooms
     # Towards no room, and nothing seen beyond it either: not an opening.
-    towards_none = np.where((sides[:, 0] < 0)[:, None], normal, -normal)
-    beyond = _free_near(grid, along + (radius + 2.5 * grid.cell) * towards_none[:, None])
+    beyond = _seen_beyond(grid, sides, along, normal, radius)
     lone = sides.min(axis=1) < 0
     door = crossed & (sides[:, 0] != sides[:, 1]) & (sides.max(axis=1) >= 0) & (~lone | beyond)
     return [
@@ -902,6 +901,18 @@ def _sides(
         best = np.argmax(count * (found.max() + 2) - found, axis=1)  # most, then smallest
         sides.append(np.where(valid.any(axis=1), found[np.arange(len(found)), best], -1))
     return np.stack(sides, axis=1), along, normal
+
+
+def _seen_beyond(
+    grid: _Grid, sides: NDArray[np.int64], along: Array, normal: Array, radius: float
+) -> NDArray[np.bool_]:
+    """Per span, floor seen free just past it on its side with no room (``_sides``' output).
+
+    As far out as ``_sides`` looks: past the barrier, on the second side's way if the first
+    has a room, else on the first's.
+    """
+    towards_none = np.where((sides[:, 0] < 0)[:, None], normal, -normal)
+    return _free_near(grid, along + (radius + 2.5 * grid.cell) * towards_none[:, None])
 
 
 def _free_near(grid: _Grid, points: Array) -> NDArray[np.bool_]:
