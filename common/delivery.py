@@ -124,9 +124,7 @@ class CatchUpInbox:
 
     def recv(self) -> zenoh.Sample:
         """The next sample, waiting for one. Raises zenoh.ZError once the channel is closed."""
-        while self._asking.is_set():
-            if self._fetched:
-                return self._fetched.popleft()
+        while self._asking.is_set() and not self._fetched:
             time.sleep(CATCH_UP_POLL)
         if self._fetched:
             return self._fetched.popleft()
