@@ -18,13 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REAL_DATA, Stack, ask_zenoh, free_port, run_wallmap
+from conftest import Stack, ask_zenoh, free_port, real_bag, run_wallmap
 
 from wallmap.common.codec import decode
 
 pytestmark = pytest.mark.e2e
 
-JACKAL = REAL_DATA / "jackal_arena_2026-02-17-15-54-31"
+JACKAL = "jackal_arena_2026-02-17-15-54-31"
 MOCAP = "pose:/vrpn_client_node/jackal/pose"
 
 
@@ -38,8 +38,7 @@ def _query(endpoint: str, prefix: str) -> dict:
 
 
 def test_the_jackal_arena_as_two_robots_is_one_map_of_six_walls(tmp_path: Path) -> None:
-    if not JACKAL.exists():
-        pytest.skip(f"real recording {JACKAL} is absent (shared data not mounted beside the repo)")
+    jackal = real_bag(JACKAL)
     at_a, at_b = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     stack = Stack(tmp_path, at_a, "unused")
     try:
@@ -52,9 +51,9 @@ def test_the_jackal_arena_as_two_robots_is_one_map_of_six_walls(tmp_path: Path) 
                 stack.start(f"{service}-{robot}", service, "--connect", endpoint, "--prefix", robot)
         stack.start("merge", "merge", "--robots", "A,B", "--prefix", "F", "--connect", at_a)
         a = ("--pose-source", MOCAP, "--duration", "22", "--connect", at_a, "--prefix", "A")
-        run_wallmap("player", str(JACKAL), "--fast", "--wait-for", "detector,mapper", *a)
+        run_wallmap("player", str(jackal), "--fast", "--wait-for", "detector,mapper", *a)
         b = ("--pose-source", "none", "--start", "18", "--connect", at_b, "--prefix", "B")
-        run_wallmap("player", str(JACKAL), "--fast", "--wait-for", "detector,mapper,odometry", *b)
+        run_wallmap("player", str(jackal), "--fast", "--wait-for", "detector,mapper,odometry", *b)
         frames = _query(at_a, "A")["frames"] + _query(at_b, "B")["frames"]
         deadline = time.monotonic() + 20
         while (fleet := _query(at_a, "F"))["frames"] < frames or not _robots(at_a)["B"]["aligned"]:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REAL_DATA, free_port, run_wallmap
+from conftest import free_port, real_bag, run_wallmap
 
 from wallmap.common.map_consistency import MappedWall, distance_to_walls, fans
 from wallmap.common.se2 import transform_points
@@ -24,14 +24,8 @@ from wallmap.scene.bags import tum_path_for
 
 pytestmark = pytest.mark.e2e
 
-JACKAL = REAL_DATA / "jackal_arena_2026-02-17-15-54-31"
+JACKAL = "jackal_arena_2026-02-17-15-54-31"
 MOCAP = "pose:/vrpn_client_node/jackal/pose"
-
-
-def _jackal() -> Path:
-    if not JACKAL.exists():
-        pytest.skip(f"real recording {JACKAL} is absent (shared data not mounted beside the repo)")
-    return JACKAL
 
 
 def _up(bag: Path, out: Path, *flags: str, timeout: float = 180.0) -> dict:
@@ -76,7 +70,7 @@ JACKAL_RUNS = [
 
 @pytest.mark.parametrize(("label", "flags"), JACKAL_RUNS, ids=[r[0] for r in JACKAL_RUNS])
 def test_the_jackal_arena_maps_as_six_walls(tmp_path: Path, label: str, flags) -> None:
-    bag = _jackal()
+    bag = real_bag(JACKAL)
     reply = _up(bag, tmp_path / "map.json", *flags)
     walls = [MappedWall.from_reply(w) for w in reply["walls"]]
     explained = _explained(reply, bag)
@@ -151,7 +145,7 @@ def test_a_late_noisy_glitching_tum_file_still_maps_the_scene(tmp_path: Path) ->
 
 
 def test_trust_poses_and_a_given_latency_do_what_they_say(tmp_path: Path) -> None:
-    bag = _jackal()
+    bag = real_bag(JACKAL)
     trusted = _up(bag, tmp_path / "trusted.json", "--fast", "--pose-source", MOCAP, "--trust-poses")
     assert "pose_source" not in trusted, "nothing judged"
     given = _up(
