@@ -1,8 +1,9 @@
 """How the compiled loops are reached: imported when first used, fed one kind of array.
 
-The loops (``line_kernels``, ``band_kernels``) are numba functions. Importing numba takes 0.2 s,
-which every wallmap command would pay, since the configuration they all read imports the
-modules that call the loops; so those modules reach them through these functions instead.
+The loops (``line_kernels``, ``band_kernels``, ``room_kernels``) are numba functions. Importing
+numba takes 0.2 s, which every wallmap command would pay, since the configuration they all read
+imports the modules that call the loops; so those modules reach them through these functions
+instead.
 
 numba compiles a loop once per kind of array it is given: read-only (a frame decoded from the
 wire) or not, contiguous or not, each dtype. ``plain`` hands them one kind only, so the loops
@@ -37,6 +38,14 @@ def band_kernels() -> ModuleType:
     return module
 
 
+@functools.cache
+def room_kernels() -> ModuleType:
+    """``common/room_kernels.py``: room segmentation's passes over the grid."""
+    from wallmap.common import room_kernels as module  # noqa: PLC0415 - see the module's doc
+
+    return module
+
+
 def plain(array: Any, dtype: DTypeLike) -> NDArray[Any]:
     """``array`` as the loops take it: C-contiguous, writeable, ``dtype`` (copied if need be)."""
     if (
@@ -59,4 +68,5 @@ def compile_all() -> float:
     start = time.perf_counter()
     line_kernels().warm_up()
     band_kernels().warm_up()
+    room_kernels().warm_up()
     return time.perf_counter() - start

@@ -1,9 +1,7 @@
 """Regions of a boolean grid: connected components, outlines as polygons, simplification.
 
-What room segmentation needs of image processing, in numpy and a little Python: the mapper
-carries no image library. Components are found on runs of cells (a row's stretches of True),
-joined where runs of neighbouring rows overlap (4-connectivity), so the Python work grows with
-the number of runs, a few thousand for a building, not with the cells.
+What room segmentation needs of image processing, in numpy, a little Python and one compiled
+pass (components, ``room_kernels``): the mapper carries no image library.
 """
 
 from __future__ import annotations
@@ -11,69 +9,18 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common import compiled
+
 Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
 
-def _runs(mask: Mask) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """Each row's stretches of True: row, first column, column past the last; row-major."""
-    padded = np.zeros((mask.shape[0], mask.shape[1] + 2), dtype=np.int8)
-    padded[:, 1:-1] = mask
-    step = np.diff(padded, axis=1)
-    rows, starts = np.nonzero(step == 1)
-    _, ends = np.nonzero(step == -1)
-    return rows, starts, ends
-
-
 def label(mask: Mask) -> tuple[NDArray[np.int32], int]:
-    """4-connected components of ``mask``: labels 0..n-1 (-1 outside ``mask``), and n."""
-    rows, starts, ends = _runs(mask)
-    if not len(rows):
-        return np.full(mask.shape, -1, dtype=np.int32), 0
-    root = _components(len(rows), *_touching_runs(rows, starts, ends, mask.shape[1]))
-    _, run_label = np.unique(root, return_inverse=True)
-    # Each run written as a step up at its start and down at its end, summed along its row.
-    steps = np.zeros((mask.shape[0], mask.shape[1] + 1), dtype=np.int32)
-    steps[rows, starts] = run_label + 1
-    steps[rows, ends] = -(run_label + 1)
-    labels = np.cumsum(steps[:, :-1], axis=1, dtype=np.int32) - 1
-    return labels, int(run_label.max()) + 1
+    """4-connected components of ``mask``: labels 0..n-1 (-1 outside ``mask``), and n.
 
-
-def _touching_runs(
-    rows: NDArray[np.int64], starts: NDArray[np.int64], ends: NDArray[np.int64], width: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Pairs of runs in neighbouring rows that overlap (share a column): 4-connected.
-
-    The runs of the next row that overlap run a start before a ends and end after a starts:
-    a contiguous stretch of the row-major list, found for every run at once by searching keys
-    row * (width + 1) + column.
+    Components are numbered by their first cell, row-major (``room_kernels.label4``).
     """
-    stride = width + 1
-    lo = np.searchsorted(rows * stride + ends, (rows + 1) * stride + starts, side="right")
-    hi = np.searchsorted(rows * stride + starts, (rows + 1) * stride + ends, side="left")
-    a, k = spread(np.maximum(hi - lo, 0))
-    return a, lo[a] + k
-
-
-def _components(n: int, a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Each of ``n`` nodes' component (its smallest member) of the graph with edges a-b.
-
-    Union by hooking roots to the smaller root, then pointer jumping until every node points
-    at its root; repeated until no edge joins two roots: whole arrays per round, a few rounds.
-    """
-    parent = np.arange(n)
-    while True:
-        pa, pb = parent[a], parent[b]
-        apart = pa != pb
-        if not apart.any():
-            return parent
-        np.minimum.at(parent, np.maximum(pa, pb)[apart], np.minimum(pa, pb)[apart])
-        while True:
-            jumped = parent[parent]
-            if np.array_equal(jumped, parent):
-                break
-            parent = jumped
+    return compiled.room_kernels().label4(compiled.plain(mask, np.bool_))
 
 
 def spread(counts: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

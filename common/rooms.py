@@ -29,8 +29,8 @@ and the benchmarks share it. Ids are not given here (``services.mapper.room_map`
 
 from __future__ import annotations
 
+import copy
 import dataclasses
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common import compiled
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.grid_labels import (
     convex_hull,
@@ -125,7 +126,8 @@ class Opening:
     @property
     def width(self) -> float:
         """Its length (m)."""
-        return float(np.hypot(*(self.p1 - self.p0)))
+        (x0, y0), (x1, y1) = self.p0.tolist(), self.p1.tolist()
+        return math.hypot(x1 - x0, y1 - y0)
 
 
 @dataclass
@@ -162,6 +164,25 @@ class Layout:
 
 
 @dataclass(frozen=True)
+class _Segments:
+    """Every wall's segments, end to end: read from the walls once per segmentation."""
+
+    a: Array  # (s, 2) each segment's first end
+    b: Array  # (s, 2) ...and second
+    owner: NDArray[np.int64]  # (s,) its wall, an index into the walls
+    wall: NDArray[np.int64]  # (s,) its wall's id
+
+    @classmethod
+    def of(cls, walls: Sequence[WallSegments]) -> _Segments:
+        """The segments of ``walls``, in their order."""
+        pieces = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
+        joined = np.concatenate([np.zeros((0, 2, 2)), *pieces])
+        owner = np.repeat(np.arange(len(pieces)), [len(piece) for piece in pieces])
+        ids = np.array([w.id for w in walls], dtype=np.int64)
+        return cls(joined[:, 0], joined[:, 1], owner, ids[owner])
+
+
+@dataclass(frozen=True)
 class _Ends:
     """The segment ends no other wall meets (where openings may start), and all segments."""
 
@@ -171,52 +192,11 @@ class _Ends:
     outward: Array  # (e, 2) unit: the way its segment would go on
     a: Array  # (s, 2) every segment's first end
     b: Array  # (s, 2) ...and second
-    reach: float  # farthest (m) any search looks from an end (``targets``)
 
-    @functools.cached_property
-    def targets(self) -> _Targets:
-        """What each end may open onto, once for every search (``_nearest_ahead``).
-
-        Every other segment within ``reach``: its two ends and the end's foot on it.
-        """
-        k, s = _near(self.point, self.a, self.b, self.reach)  # by end, then segment
-        other = s != self.piece[k]
-        k, s = k[other], s[other]
-        # An end's rows together: its segments' first ends, their second ends, its feet.
-        count = np.bincount(k, minlength=len(self.point))
-        row = 2 * (np.cumsum(count) - count)[k] + np.arange(len(k))
-        points = np.empty((3 * len(k), 2))
-        points[row] = self.a[s]
-        points[row + count[k]] = self.b[s]
-        points[row + 2 * count[k]] = _foot(self.point[k], self.a[s], self.b[s])
-        end = np.repeat(np.arange(len(self.point)), 3 * count)
-        dx, dy = (points - self.point[end]).T
-        dist = np.hypot(dx, dy)
-        ox, oy = self.outward[end].T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cosine = (dx * ox + dy * oy) / dist
-        dist[dist <= 1e-6] = np.inf
-        return _Targets(end, points, dist, cosine)
-
-
-@dataclass(frozen=True)
-class _Targets:
-    """Points an end may open onto, one row each (``_Ends.targets``).
-
-    Rows are grouped by end; within an end, in the order of all segments' first ends, then
-    second ends, then feet, which settles ties in distance whatever was left out as too far.
-    """
-
-    end: NDArray[np.int64]
-    points: Array
-    dist: Array
-    cosine: Array
-
-    @functools.cached_property
-    def groups(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """Each end's first row, and each row's group (an index into the first)."""
-        new = np.diff(self.end, prepend=-1) != 0
-        return np.flatnonzero(new), np.cumsum(new) - 1
+    def left_open(self, used: set[tuple[float, ...]]) -> NDArray[np.int64]:
+        """The ends that are no end of a span found (``used``, as ``_end_key``s)."""
+        keys = map(tuple, np.round(self.point, 3).tolist())
+        return np.array([k for k, key in enumerate(keys) if key not in used], dtype=np.int64)
 
 
 def _near(
@@ -228,9 +208,7 @@ def _near(
     the exact tests run on these alone, not on every end against every segment.
     """
     lo, hi = np.minimum(a, b) - radius, np.maximum(a, b) + radius
-    x, y = points[:, :1], points[:, 1:]
-    k, s = np.nonzero((x >= lo[:, 0]) & (x <= hi[:, 0]) & (y >= lo[:, 1]) & (y <= hi[:, 1]))
-    return k.astype(np.int64), s.astype(np.int64)
+    return compiled.room_kernels().near_pairs(compiled.plain(points, np.float64), lo, hi)
 
 
 def _foot(points: Array, a: Array, b: Array) -> Array:
@@ -240,12 +218,9 @@ def _foot(points: Array, a: Array, b: Array) -> Array:
     return a + t[:, None] * (b - a)
 
 
-def _free_ends(walls: Sequence[WallSegments], joint: float, reach: float) -> _Ends:
+def _free_ends(segments: _Segments, joint: float) -> _Ends:
     """The ends of every segment not within ``joint`` of another segment (a corner, a T)."""
-    segments = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
-    owners = np.concatenate([[w.id] * len(s) for w, s in zip(walls, segments, strict=True)] + [[]])
-    pieces = np.concatenate(segments) if segments else np.zeros((0, 2, 2))
-    a, b = pieces[:, 0], pieces[:, 1]
+    a, b = segments.a, segments.b
     point = np.concatenate([a, b])
     outward = np.concatenate([a - b, b - a])
     piece = np.tile(np.arange(len(a)), 2)
@@ -264,13 +239,12 @@ def _free_ends(walls: Sequence[WallSegments], joint: float, reach: float) -> _En
         point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at
     )
     return _Ends(
-        wall=owners.astype(np.int64)[piece[keep]],
+        wall=segments.wall[piece[keep]],
         piece=piece[keep],
         point=point[keep],
         outward=outward[keep] / norm[keep, None],
         a=a,
         b=b,
-        reach=reach,
     )
 
 
@@ -315,15 +289,18 @@ def openings(
     config: RoomsConfig,
     reach: float | None = None,
     angle: float | None = None,
+    among: NDArray[np.int64] | None = None,
 ) -> list[Opening]:
     """Every free end's opening to the nearest wall roughly along its own wall (step 1).
 
     ``reach`` and ``angle``: how far and how far off its wall's direction to look (the
-    configuration's door width and angle unless given).
+    configuration's door width and angle unless given). ``among``: the ends to look from
+    (indices, ascending), all unless given.
     """
     reach = config.door_max if reach is None else reach
     cos_max = math.cos(math.radians(config.door_angle if angle is None else angle))
-    targets = _nearest_ahead(ends, reach, cos_max)
+    among = np.arange(len(ends.point)) if among is None else among
+    targets = _nearest_ahead(ends, among, reach, cos_max)
     ahead = np.flatnonzero(np.isfinite(targets[:, 0]))
     crossing = _crossing(ends.point[ahead], targets[ahead], ends.a, ends.b, ends.piece[ahead])
     kept = ahead[~crossing]
@@ -334,10 +311,11 @@ def openings(
     )
     first, second = np.where(swap[:, None], target, point), np.where(swap[:, None], point, target)
     keys = np.round(np.concatenate([first, second], axis=1), 2).tolist()
-    found: dict[tuple[float, ...], Opening] = {}
+    once: dict[tuple[float, ...], int] = {}  # each key's first span
     for k, key in enumerate(keys):
-        found.setdefault(tuple(key), Opening(int(ends.wall[kept[k]]), point[k], target[k]))
-    return list(found.values())
+        once.setdefault(tuple(key), k)
+    walls = ends.wall[kept].tolist()
+    return [Opening(walls[k], point[k], target[k]) for k in once.values()]
 
 
 def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) -> list[Opening]:
@@ -347,15 +325,14 @@ def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) ->
     ``passage_angle``: an opening too wide for a door that still divides two spaces, as an
     open-plan office's passages do. Ends that already have a span (``spans``) are left.
     """
-    return _facing_ends(ends, config, _ends_of(spans))
-
-
-def _facing_ends(ends: _Ends, config: RoomsConfig, used: set[tuple[float, ...]]) -> list[Opening]:
-    """Passages between two free ends of one line of wall, facing each other (``passages``)."""
-    gap = ends.point[None, :] - ends.point[:, None]  # (i, j): from end i to end j
+    used = _ends_of(spans)
+    among = ends.left_open(used)
+    point = ends.point[among]
+    gap = point[None, :] - point[:, None]  # (i, j): from end i to end j
     dist = np.hypot(gap[..., 0], gap[..., 1])
     i, j = np.nonzero(np.triu((dist > config.door_max) & (dist <= config.passage_max), 1))
     (gx, gy), dist = gap[i, j].T, dist[i, j]
+    i, j = among[i], among[j]
     (ox, oy), (px, py) = ends.outward[i].T, ends.outward[j].T
     cos_min = math.cos(math.radians(config.passage_angle))
     facing = ((gx * ox + gy * oy) / dist >= cos_min) & (-(gx * px + gy * py) / dist >= cos_min)
@@ -370,23 +347,23 @@ def _facing_ends(ends: _Ends, config: RoomsConfig, used: set[tuple[float, ...]])
     return found
 
 
-def _nearest_ahead(ends: _Ends, reach: float, cos_max: float) -> Array:
-    """Per end, the nearest point of another segment ahead of it; NaN where none.
+def _nearest_ahead(ends: _Ends, among: NDArray[np.int64], reach: float, cos_max: float) -> Array:
+    """Per end of ``among``, the nearest point of another segment ahead of it; NaN where none.
 
     A segment's ends or the foot on it, within ``reach``, at most ``acos(cos_max)`` off the
-    end's outward direction.
+    end's outward direction. A tie in distance goes to the first of all segments' first ends,
+    then their second ends, then the feet (``room_kernels.nearest_ahead``).
     """
-    found = ends.targets
-    out = np.full((len(ends.point), 2), np.nan)
-    if not len(found.end):
-        return out
-    dist = np.where((found.dist <= reach) & (found.cosine >= cos_max), found.dist, np.inf)
-    first, group = found.groups
-    nearest = np.minimum.reduceat(dist, first)
-    hit = np.flatnonzero((dist == nearest[group]) & np.isfinite(dist))
-    _, once = np.unique(group[hit], return_index=True)  # the first of a tie
-    out[found.end[hit[once]]] = found.points[hit[once]]
-    return out
+    return compiled.room_kernels().nearest_ahead(
+        compiled.plain(among, np.int64),
+        ends.point,
+        ends.outward,
+        ends.piece,
+        compiled.plain(ends.a, np.float64),
+        compiled.plain(ends.b, np.float64),
+        reach,
+        cos_max,
+    )
 
 
 def _end_key(point: Array) -> tuple[float, ...]:
@@ -428,26 +405,28 @@ def _crossing(p: Array, q: Array, a: Array, b: Array, own: NDArray[np.int64]) ->
 class _Grid:
     """The cells over everything known: global index (i, j) -> local [i - i0, j - j0]."""
 
-    def __init__(self, free: FreeSpace, walls: Sequence[WallSegments]) -> None:
+    def __init__(self, free: FreeSpace, segments: _Segments) -> None:
+        """Over the floor seen free and every wall's ends, ``PAD`` cells round them.
+
+        Not over all of ``free``'s grid: it grows by wide margins, and every step of the
+        segmentation costs by the cell.
+        """
         self.cell = free.cell
-        ends = [np.asarray(w.segments, dtype=float).reshape(-1, 2) for w in walls]
-        low = np.array(free.origin, dtype=np.int64)
-        high = low + np.array(free.counts.shape, dtype=np.int64) - 1
-        if ends and sum(len(e) for e in ends):
-            points = np.floor(np.concatenate(ends) / self.cell).astype(np.int64)
-            low = np.minimum(low, points.min(axis=0)) if free.counts.size else points.min(axis=0)
-            high = np.maximum(high, points.max(axis=0)) if free.counts.size else points.max(axis=0)
+        seen = free.free()
+        rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+        ends = np.concatenate([segments.a, segments.b])
+        known = [np.floor(ends / self.cell).astype(np.int64)]
+        if len(rows):
+            known.append(free.origin + np.array([[rows[0], cols[0]], [rows[-1], cols[-1]]]))
+        points = np.concatenate(known) if sum(map(len, known)) else np.zeros((1, 2), np.int64)
+        low, high = points.min(axis=0), points.max(axis=0)
         self.origin = low - PAD
         self.shape = tuple((high - low + 1 + 2 * PAD).tolist())
         self.free = np.zeros(self.shape, dtype=bool)
-        if free.counts.size:
-            at = free.origin - self.origin
-            seen = free.free()
-            self.free[at[0] : at[0] + seen.shape[0], at[1] : at[1] + seen.shape[1]] = seen
-
-    def centres(self, i: NDArray[np.int64], j: NDArray[np.int64]) -> Array:
-        """Map-frame centres of local cells."""
-        return (np.stack([i, j], axis=-1) + self.origin + 0.5) * self.cell
+        if len(rows):
+            at = free.origin + np.array([rows[0], cols[0]]) - self.origin
+            part = seen[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+            self.free[at[0] : at[0] + part.shape[0], at[1] : at[1] + part.shape[1]] = part
 
     def local(
         self, points: Array
@@ -458,25 +437,13 @@ class _Grid:
         return idx[..., 0].clip(0, self.shape[0] - 1), idx[..., 1].clip(0, self.shape[1] - 1), ok
 
     def draw(self, mask: NDArray[np.bool_], p: Array, q: Array, radius: float) -> None:
-        """Mark the cells whose centres lie within ``radius`` of a segment p[k]-q[k] (k, 2).
-
-        All segments at once: each one's box of cells, listed end to end, tested together.
-        """
-        p, q = np.asarray(p, dtype=float).reshape(-1, 2), np.asarray(q, dtype=float).reshape(-1, 2)
+        """Mark the cells whose centres lie within ``radius`` of a segment p[k]-q[k] (k, 2)."""
+        p = compiled.plain(np.reshape(p, (-1, 2)), np.float64)
+        q = compiled.plain(np.reshape(q, (-1, 2)), np.float64)
         lo = np.floor((np.minimum(p, q) - radius) / self.cell).astype(np.int64) - self.origin
         hi = np.floor((np.maximum(p, q) + radius) / self.cell).astype(np.int64) - self.origin
         lo, hi = np.maximum(lo, 0), np.minimum(hi, np.array(self.shape) - 1)
-        size = np.maximum(hi - lo + 1, 0)  # (k, 2): cells along i and j
-        count = size[:, 0] * size[:, 1]
-        seg, rank = spread(count)
-        ii = lo[seg, 0] + rank // np.maximum(size[seg, 1], 1)
-        jj = lo[seg, 1] + rank % np.maximum(size[seg, 1], 1)
-        c = self.centres(ii, jj)
-        d = q - p
-        t = np.einsum("nk,nk->n", c - p[seg], d[seg]) / np.maximum((d**2).sum(axis=1), 1e-12)[seg]
-        foot = p[seg] + np.clip(t, 0.0, 1.0)[:, None] * d[seg]
-        near = np.hypot(*(c - foot).T) <= radius
-        mask[ii[near], jj[near]] = True
+        compiled.room_kernels().draw_segments(mask, lo, hi, p, q, self.origin, self.cell, radius)
 
 
 def find_rooms(
@@ -491,16 +458,13 @@ def find_rooms(
     whose cells did not change (most, between two updates of a large map); updated in place.
     """
     config = config or RoomsConfig()
-    grid = _Grid(free, walls)
+    segments = _Segments.of(walls)
+    grid = _Grid(free, segments)
     if not grid.free.any():
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
     drawn = np.zeros(grid.shape, dtype=bool)
-    ends = _free_ends(
-        walls,
-        config.joint,
-        max(config.door_max, config.passage_max, config.divider_max, config.blind_max),
-    )
+    ends = _free_ends(segments, config.joint)
     grid.draw(drawn, ends.a, ends.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
@@ -515,9 +479,9 @@ def find_rooms(
     for k, closed in enumerate(rooms):
         if not closed:
             _fill_open(grid, labels, barrier, k, config.fill_reach)
-    _grow(labels, barrier, math.ceil(radius / grid.cell))
-    shapes = _shapes(grid, _cells_of(labels, len(rooms)), rooms, config, outlines)
-    _bounding_walls(grid, labels, walls, shapes, radius)
+    compiled.room_kernels().grow(labels, barrier, math.ceil(radius / grid.cell))
+    shapes = _shapes(grid, _cells_of(grid, labels, len(rooms)), rooms, config, outlines)
+    _bounding_walls(grid, labels, walls, segments, shapes, radius)
     doors = _doors(grid, labels, [s for s in spans if s.width >= config.door_min], radius)
     return Layout(shapes, doors)
 
@@ -610,7 +574,8 @@ def _divider_spans(
     used = _ends_of(spans)
     length = np.hypot(*(ends.b - ends.a).T)
     found = []
-    for span in openings(ends, config, config.divider_max, config.passage_angle):
+    among = ends.left_open(used)
+    for span in openings(ends, config, config.divider_max, config.passage_angle, among):
         if _end_key(span.p0) in used or span.width <= config.door_max:
             continue
         k = int(np.argmin(np.hypot(*(ends.point - span.p0).T)))  # the end it starts from
@@ -636,8 +601,8 @@ def _blind_spans(
     """
     used = _ends_of(spans)
     found = []
-    for span in openings(ends, config, config.blind_max, config.blind_angle):
-        if _end_key(span.p0) in used or span.width <= config.door_max:
+    for span in openings(ends, config, config.blind_max, config.blind_angle, ends.left_open(used)):
+        if span.width <= config.door_max:
             continue
         t = np.linspace(0.0, 1.0, max(3, int(span.width / grid.cell)))[:, None]
         i, j, ok = grid.local(span.p0 + t * (span.p1 - span.p0))
@@ -650,28 +615,28 @@ def _regions(
     grid: _Grid, barrier: NDArray[np.bool_], config: RoomsConfig
 ) -> tuple[NDArray[np.int32], list[bool]]:
     """Room labels per cell (-1: none) and whether each room is closed (step 2)."""
+    kernels = compiled.room_kernels()
     regions, n = label(~barrier)
     leaky = touches_border(regions, n)
     min_cells = config.min_area / grid.cell**2
-    seen = _counts(np.where(grid.free, regions, -1), n)
+    cells, seen = kernels.label_counts(regions, n, grid.free)
     # Enclosed, and mostly seen: spans closed across unexplored space (it looks like glass:
     # nothing seen through) can enclose more unknown than floor; such a region is open.
-    leaky |= seen < config.closed_seen * _counts(regions, n)
+    leaky |= seen < config.closed_seen * cells
     enclosed = np.flatnonzero((seen >= min_cells) & ~leaky)
     room_of = np.full(n + 1, -1, dtype=np.int32)  # region -> room; the last entry for -1
     room_of[enclosed] = np.arange(len(enclosed))
     closed = [True] * len(enclosed)
     pieces, m = label(grid.free & np.append(leaky, False)[regions])  # open regions' seen floor
-    kept = np.flatnonzero(_counts(pieces, m) >= config.min_open_area / grid.cell**2)
+    kept = np.flatnonzero(
+        kernels.label_counts(pieces, m, grid.free)[0] >= config.min_open_area / grid.cell**2
+    )
     piece_room = np.full(m + 1, -1, dtype=np.int32)
     piece_room[kept] = len(closed) + np.arange(len(kept))
-    labels = np.where(pieces >= 0, piece_room[pieces], room_of[regions])
+    labels = room_of[regions]
+    open_floor = pieces >= 0
+    labels[open_floor] = piece_room[pieces[open_floor]]
     return labels, closed + [False] * len(kept)
-
-
-def _counts(labels: NDArray[np.int32], n: int) -> NDArray[np.int64]:
-    """Cells per label 0..n-1 (-1: none)."""
-    return np.bincount(labels.ravel() + 1, minlength=n + 1)[1:]
 
 
 def _fill_open(
@@ -727,26 +692,22 @@ def _edge(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return mask & _dilate(~mask, 1)
 
 
-def _grow(labels: NDArray[np.int32], barrier: NDArray[np.bool_], steps: int) -> None:
-    """Each room's cells grown ``steps`` cells into the barrier it faces (walls' half width)."""
-    for _ in range(steps):
-        for shift, axis in ((1, 0), (-1, 0), (1, 1), (-1, 1)):
-            moved = np.roll(labels, shift, axis=axis)
-            take = barrier & (labels < 0) & (moved >= 0)
-            labels[take] = moved[take]
+def _cells_of(grid: _Grid, labels: NDArray[np.int32], n: int) -> list[NDArray[np.int64]]:
+    """Each room's cells (global (i, j)), from one pass over the grid."""
+    cells, ends = compiled.room_kernels().cells_by_label(labels, n, grid.origin)
+    return np.split(cells, ends[:-1]) if n else []
 
 
-def _cells_of(labels: NDArray[np.int32], n: int) -> list[NDArray[np.int64]]:
-    """Each room's cells (local (i, j)), from one pass over the grid."""
-    flat = labels.ravel()
-    at = np.flatnonzero(flat >= 0)
-    order = np.argsort(flat[at], kind="stable")
-    bounds = np.cumsum(np.bincount(flat[at], minlength=n))
-    cells = np.stack(np.divmod(at[order], labels.shape[1]), axis=1)
-    return np.split(cells, bounds[:-1]) if n else []
+def _cells_key(cells: NDArray[np.int64]) -> tuple[int, ...]:
+    """A room's cells (global, as ``_cells_of`` orders them) told apart from most others.
+
+    At a glance: their count, first and last. Equal keys still need the cells compared;
+    hashing them all would cost more than the rest of a large map's update.
+    """
+    return (len(cells), *cells[:1].ravel().tolist(), *cells[-1:].ravel().tolist())
 
 
-Outlines = dict[tuple[bool, bytes], RoomShape]  # (closed, global cells' bytes) -> shape
+Outlines = dict[tuple[bool, tuple[int, ...]], RoomShape]  # (closed, ``_cells_key``) -> shape
 
 
 def _shapes(
@@ -760,10 +721,13 @@ def _shapes(
     known = {} if outlines is None else outlines
     shapes, kept = [], {}
     for mine, shut in zip(cells, closed, strict=True):
-        key = (shut, (mine + grid.origin).tobytes())
-        shape = known.get(key) or _shape(grid, mine, shut, config)
+        key = (shut, _cells_key(mine))
+        shape = known.get(key)
+        if shape is None or not np.array_equal(shape.cells, mine):
+            shape = _shape(grid, mine, shut, config)
         kept[key] = shape
-        shapes.append(dataclasses.replace(shape, walls=[]))
+        shapes.append(copy.copy(shape))
+        shapes[-1].walls = []
     if outlines is not None:
         outlines.clear()
         outlines.update(kept)
@@ -779,13 +743,13 @@ def _shape(grid: _Grid, cells: NDArray[np.int64], closed: bool, config: RoomsCon
     box = np.zeros(tuple(cells.max(axis=0) - low + 1), dtype=bool)
     box[cells[:, 0] - low[0], cells[:, 1] - low[1]] = True
     corners = outline(box) + low
-    polygon = simplify((corners + grid.origin) * grid.cell, config.simplify)
+    polygon = simplify(corners * grid.cell, config.simplify)
     return RoomShape(
         polygon=polygon,
         area=abs(polygon_area(polygon)),
         centroid=polygon_centroid(polygon),
         closed=closed,
-        cells=cells + grid.origin,
+        cells=cells,
     )
 
 
@@ -793,6 +757,7 @@ def _bounding_walls(
     grid: _Grid,
     labels: NDArray[np.int32],
     walls: Sequence[WallSegments],
+    segments: _Segments,
     shapes: list[RoomShape],
     radius: float,
 ) -> None:
@@ -803,11 +768,9 @@ def _bounding_walls(
     of its samples (two at least).
     """
     reach = radius + 1.5 * grid.cell
-    pieces = [np.asarray(w.segments, dtype=float).reshape(-1, 2, 2) for w in walls]
-    if not shapes or not sum(len(piece) for piece in pieces):
+    if not shapes or not len(segments.a):
         return
-    owner = np.concatenate([np.full(len(piece), k) for k, piece in enumerate(pieces)])
-    a, b = np.concatenate(pieces)[:, 0], np.concatenate(pieces)[:, 1]
+    a, b, owner = segments.a, segments.b, segments.owner
     length = np.hypot(*(b - a).T)
     real = length >= 1e-9
     a, b, length, owner = a[real], b[real], length[real], owner[real]

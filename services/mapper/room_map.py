@@ -25,7 +25,6 @@ from numpy.typing import NDArray
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.map_records import WallRecord
 from wallmap.common.rooms import (
-    DoorShape,
     Layout,
     Outlines,
     RoomsConfig,
@@ -249,19 +248,24 @@ class RoomMap:
         return self.reply
 
     def _records(self, layout: Layout, stamp: float | None) -> RoomsReply:
+        p0 = np.array([d.p0 for d in layout.doors]).reshape(-1, 2)
+        p1 = np.array([d.p1 for d in layout.doors]).reshape(-1, 2)
         room_ids = self._room_ids(layout.rooms)
-        door_ids = self._door_ids(layout.doors)
+        door_ids = self._door_ids((p0 + p1) / 2)
+        widths = np.round(np.hypot(*(p1 - p0).T), 3).tolist()
         doors = tuple(
             DoorRecord(
                 id=door_ids[k],
-                center=_pt((d.p0 + d.p1) / 2),
-                width=round(float(np.hypot(*(d.p1 - d.p0))), 3),
-                p0=_pt(d.p0),
-                p1=_pt(d.p1),
+                center=centre,
+                width=width,
+                p0=start,
+                p1=end,
                 wall=d.wall,
                 rooms=tuple(sorted(room_ids[r] for r in d.rooms)),
             )
-            for k, d in enumerate(layout.doors)
+            for k, (d, centre, width, start, end) in enumerate(
+                zip(layout.doors, _pts((p0 + p1) / 2), widths, _pts(p0), _pts(p1), strict=True)
+            )
         )
         doors_of: dict[int, list[int]] = {}
         for door in doors:
@@ -282,29 +286,42 @@ class RoomMap:
         return RoomsReply(stamp, tuple(sorted(rooms, key=lambda r: r.id)), doors)
 
     def _room_ids(self, rooms: list[RoomShape]) -> list[int]:
-        """Each new room's id: the old room it overlaps most, else a new one."""
+        """Each new room's id: the old room it overlaps most, else a new one.
+
+        A room whose cells are the old room's, as most are between two updates of a large map,
+        overlaps that one alone: it takes its id without the overlaps counted. Such a room
+        comes with the very array of cells the old room had (``find_rooms`` keeps its outline,
+        cells and all), so it is found by that; any other goes to the overlaps.
+        """
         cells = [r.cells for r in rooms]
-        ids = _greedy(sorted(_overlaps(self.kept, cells), reverse=True))
+        old = {id(k.cells): k for k in self.kept}
+        ids = {n: old.pop(id(mine)).id for n, mine in enumerate(cells) if id(mine) in old}
+        rest = [n for n in range(len(cells)) if n not in ids]
+        pairs = _overlaps(list(old.values()), [cells[n] for n in rest])
+        ids |= {rest[n]: i for n, i in _greedy(sorted(pairs, reverse=True)).items()}
         for k in range(len(rooms)):
             if k not in ids:
                 ids[k], self.next_room = self.next_room, self.next_room + 1
         self.kept = [_Kept(ids[k], mine) for k, mine in enumerate(cells)]
         return [ids[k] for k in range(len(rooms))]
 
-    def _door_ids(self, doors: list[DoorShape]) -> list[int]:
-        """Each new door's id: an old door's near its centre, else a new one."""
-        centres = np.array([(d.p0 + d.p1) / 2 for d in doors]).reshape(-1, 2)
+    def _door_ids(self, centres: Array) -> list[int]:
+        """Each new door's id, by its centre: an old door's near it, else a new one."""
         old_ids = list(self.doors)
         old = np.array([self.doors[i] for i in old_ids]).reshape(-1, 2)
-        gaps = np.hypot(*(centres[:, None] - old[None]).transpose(2, 0, 1))
+        apart = centres[:, None] - old[None]
+        gaps = np.hypot(apart[..., 0], apart[..., 1])
         near = np.argwhere(gaps <= DOOR_REACH)
-        pairs = sorted((float(gaps[k, m]), int(k), old_ids[m]) for k, m in near.tolist())
+        pairs = sorted(
+            (gap, k, old_ids[m])
+            for gap, (k, m) in zip(gaps[gaps <= DOOR_REACH].tolist(), near.tolist(), strict=True)
+        )
         ids = _greedy(pairs)
-        for k in range(len(doors)):
+        for k in range(len(centres)):
             if k not in ids:
                 ids[k], self.next_door = self.next_door, self.next_door + 1
         self.doors = {ids[k]: c for k, c in enumerate(centres)}
-        return [ids[k] for k in range(len(doors))]
+        return [ids[k] for k in range(len(centres))]
 
     def to_json(self) -> dict[str, Any]:
         """For the state file: the floor, the rooms' cells and ids, the doors, the counters."""

@@ -6,16 +6,19 @@ import sys
 import numpy as np
 from test_band_kernels import MOUNT, cluttered_stack
 
-from wallmap.common import band_kernels, line_kernels
+from wallmap.common import band_kernels, line_kernels, room_kernels
 from wallmap.common.compiled import compile_all
+from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, pack, unpack_frame
+from wallmap.scene.floorplan import free_rays, generate_floorplan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
+from wallmap.services.mapper.room_map import RoomMap
 
 
 def kernels() -> dict[str, object]:
     return {
         f"{module.__name__}.{name}": value
-        for module in (line_kernels, band_kernels)
+        for module in (line_kernels, band_kernels, room_kernels)
         for name, value in vars(module).items()
         if hasattr(value, "signatures")
     }
@@ -34,6 +37,24 @@ def test_a_frame_from_the_wire_runs_the_loops_compiled_at_install() -> None:
         frame = unpack_frame(pack(sent))
         assert not frame.points.flags.writeable
         assert detector.detect(frame).walls, "the wall 3 m ahead is seen"
+    after = {name: list(k.signatures) for name, k in kernels().items()}
+    assert after == before
+
+
+def test_a_rooms_update_runs_the_loops_compiled_at_install() -> None:
+    """Wall ends are views into the map's segments, not contiguous: handed on as they are,
+    numba would compile a loop again for them in the mapper's first rooms update."""
+    compile_all()
+    before = {name: list(k.signatures) for name, k in kernels().items()}
+    plan = generate_floorplan(500)
+    records = tuple(
+        WallRecord(w.id, 0.0, 0.0, ((1e-4, 0.0), (0.0, 1e-4)), w.p0, w.p1, ((w.p0, w.p1),), 10)
+        for w in plan.walls
+    )
+    rooms = RoomMap()
+    for at in plan.route:
+        rooms.add_frame(np.array([*at, 0.0]), np.zeros(2), free_rays(plan, np.array(at)))
+    assert rooms.update(records, 0.0).rooms, "the plan's rooms are found"
     after = {name: list(k.signatures) for name, k in kernels().items()}
     assert after == before
 

@@ -18,6 +18,7 @@ from wallmap.common.rooms import (
     _crossing,
     _free_ends,
     _goes_on_along,
+    _Segments,
     find_rooms,
 )
 from wallmap.room_evaluation import iou
@@ -290,8 +291,8 @@ def test_only_a_span_going_on_along_a_wall_may_lead_into_a_glimpse() -> None:
     the wall across the room) meets that wall at 77 degrees: what is seen beyond it is the
     room's own floor before the glass, not a space beyond a door."""
     _, mapped = _corridor_with_a_closet()
-    ends = _free_ends(_walls(mapped), RoomsConfig().joint, 4.0)
+    ends = _free_ends(_Segments.of(_walls(mapped)), RoomsConfig().joint)
     assert _goes_on_along(ends, Opening(0, np.array([4.0, 0.05]), np.array(CORRIDOR[1])))
     room = [Wall(0, (0.0, 0.0), (0.0, 2.0)), Wall(1, (0.7, 5.0), (8.0, 5.0))]
-    ends = _free_ends(_walls(room), RoomsConfig().joint, 4.0)
+    ends = _free_ends(_Segments.of(_walls(room)), RoomsConfig().joint)
     assert not _goes_on_along(ends, Opening(0, np.array([0.0, 2.0]), np.array([0.7, 5.0])))

@@ -47,6 +47,7 @@ def test_ids_stay_as_the_map_grows_and_across_a_restart() -> None:
         if room.id in kept:
             assert np.hypot(*np.subtract(room.centroid, kept[room.id])) < 2.0
     assert {r.id for r in first.rooms} <= {r.id for r in second.rooms}, "no id given up"
+    assert rooms.update(_records(plan), 2.0) == second, "nothing new: the same rooms and ids"
     body = second.to_map()
     assert body["v"] == 1
     assert body["frame"] == "map"
@@ -59,6 +60,8 @@ def test_ids_stay_as_the_map_grows_and_across_a_restart() -> None:
     assert [(d.id, d.center) for d in again.doors] == [(d.id, d.center) for d in second.doors]
     more = restarted.update(_records(plan)[:-1], 4.0)  # a wall gone: the rooms may change
     assert max(r.id for r in more.rooms) < restarted.next_room
+    back = restarted.update(_records(plan), 5.0)
+    assert (back.rooms, back.doors) == (again.rooms, again.doors), "the wall back: as before"
 
 
 def test_cells_come_back_from_their_keys_on_every_side_of_the_origin() -> None:
