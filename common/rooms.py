@@ -54,7 +54,6 @@ from wallmap.common.grid_labels import (
 
 Array = NDArray[np.float64]
 PAD = 8  # cells of grid kept around everything known
-TRIM_GAP = 0.3  # m unseen along a passage bridged when its door is found (``door_span``)
 GAP_REACH = 2.5  # m past a wall's end along its line where an end across it is in its gap
 GAP_ANGLE = 45.0  # deg: an end's wall this far from another's line runs across it
 
@@ -323,9 +322,11 @@ def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) ->
 
     From ``door_max`` to ``passage_max`` wide, each end's wall pointing at the other within
     ``passage_angle``: an opening too wide for a door that still divides two spaces, as an
-    open-plan office's passages do. Ends that already have a span (``spans``) are left.
+    open-plan office's passages do. Ends that already open a span (``spans``) are left; an
+    end another's span only reaches (a glass wall's neighbour opening onto it) may still be a
+    passage's.
     """
-    used = _ends_of(spans)
+    used = {_end_key(span.p0) for span in spans}
     among = ends.left_open(used)
     point = ends.point[among]
     gap = point[None, :] - point[:, None]  # (i, j): from end i to end j
@@ -823,8 +824,9 @@ def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array
     span of door and unmapped wall. Nothing is seen through the wall, so its stretch at one end
     of the span is unseen: the longer unseen end, if ``door_min`` or more, is cut off. The
     other end's unseen stretch is door beside its jamb that no ray happened to cross (floor
-    by a jamb is often hidden from every view the robot had). Gaps of up to ``TRIM_GAP``
-    along the span are bridged.
+    by a jamb is often hidden from every view the robot had). An unseen gap narrower than
+    ``door_min`` between two crossed stretches is bridged: rays cross a door's floor sparsely,
+    at a slant, and leave such gaps; glass between two doors is seldom so narrow.
     """
     steps = max(3, math.ceil(2 * span.width / grid.cell))
     t = np.linspace(0.0, 1.0, steps)
@@ -832,7 +834,7 @@ def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array
     at = np.flatnonzero(ok & grid.free[i, j])
     if not len(at):
         return span.p0, span.p1
-    bridge = math.ceil(TRIM_GAP / (span.width / (steps - 1)))
+    bridge = math.ceil(door_min / (span.width / (steps - 1)))
     runs = np.split(at, np.flatnonzero(np.diff(at) > bridge) + 1)
     run = max(runs, key=lambda r: r[-1] - r[0])
     before, after = t[run[0]], 1.0 - t[run[-1]]  # unseen at each end, shares of the span

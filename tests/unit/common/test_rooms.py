@@ -18,7 +18,9 @@ from wallmap.common.rooms import (
     _crossing,
     _free_ends,
     _goes_on_along,
+    _Grid,
     _Segments,
+    door_span,
     find_rooms,
 )
 from wallmap.room_evaluation import iou
@@ -145,6 +147,48 @@ def test_a_divider_glass_beyond_its_door_divides_and_the_door_is_where_the_robot
     (door,) = layout.doors
     assert np.hypot(*(door.p1 - door.p0)) == pytest.approx(1.0, abs=0.2)
     assert np.mean([door.p0, door.p1], axis=0) == pytest.approx([6.05, 1.5], abs=0.15)
+
+
+def test_a_patch_of_a_door_no_ray_crossed_is_still_door() -> None:
+    """A 3 m divider span whose first 1.6 m is the door, the rest glass (never seen). The door
+    was crossed but for 0.45 m in its middle (clutter seed 500: rays cross a door's floor
+    sparsely): the door is all 1.6 m, not the 0.6 m before the patch."""
+    y = np.arange(0.01, 1.6, 0.02)
+    crossed = np.stack([np.full(len(y), 6.05), y], axis=1)[(y < 0.6) | (y > 1.05)]
+    free = FreeSpace()
+    free.add_points(np.concatenate([crossed, crossed]))  # twice: seen free
+    span = Opening(4, np.array([6.05, 0.0]), np.array([6.05, 3.0]))
+    p0, p1 = door_span(_Grid(free, _Segments.of([])), span, RoomsConfig().door_min)
+    assert p0 == pytest.approx([6.05, 0.0])
+    assert p1 == pytest.approx([6.05, 1.6], abs=0.06)
+
+
+def test_a_passages_jamb_another_end_opens_onto_is_still_the_passages() -> None:
+    """Open-plan seed 502: a 2.8 m passage in the divider (x = 6.05); beyond it the room's
+    wall leaves the divider's foot at 45 degrees as 3 m of glass, and the solid wall after the
+    glass opens onto the passage's near jamb (2.3 m), nearer than the divider's foot."""
+    foot, after = (6.05, 0.0), (8.17, 2.12)
+    walls = [
+        Wall(0, (0.0, 0.0), foot),
+        Wall(1, foot, (6.05, 1.2)),  # the divider, below the passage
+        Wall(2, (6.05, 4.0), (6.05, 5.0)),  # ...and above it
+        Wall(3, foot, after, glass=True),
+        Wall(4, after, (12.1, 2.12)),
+        Wall(5, (12.1, 2.12), (12.1, 5.0)),
+        Wall(6, (12.1, 5.0), (0.0, 5.0)),
+        Wall(7, (0.0, 5.0), (0.0, 0.0)),
+    ]
+    plan = FloorPlan(walls=tuple(walls))
+    route = np.array(
+        [[1.0 + 0.1 * k, 2.5] for k in range(40)]
+        + [[5.0 + 0.3 * k, 2.6] for k in range(7)]
+        + [[7.0 + 0.1 * k, 3.5] for k in range(40)]
+    )
+    layout = find_rooms(_walls([w for w in walls if not w.glass]), _seen(plan, route))
+    assert len(layout.rooms) == 2, "the passage divides"
+    (door,) = [d for d in layout.doors if abs(d.p0[0] - 6.05) + abs(d.p1[0] - 6.05) < 0.1]
+    assert door.rooms == (0, 1)
+    assert sorted([door.p0[1], door.p1[1]]) == pytest.approx([1.2, 4.0], abs=0.05)
 
 
 def test_an_open_plan_passage_with_glass_beside_it_divides_two_rooms() -> None:
