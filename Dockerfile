@@ -11,8 +11,8 @@ COPY pyproject.toml README.md ./
 COPY wallmap ./wallmap
 COPY common ./common
 COPY services ./services
-# The detector's loops compiled at build (numba caches them where NUMBA_CACHE_DIR says), so no
-# container spends its first seconds compiling.
+# The compiled loops (the detector's, the mapper's rooms) compiled as the image is built (numba
+# caches them where NUMBA_CACHE_DIR says), so no container spends its first seconds compiling.
 RUN pip install . \
     && python -c 'from wallmap.common.compiled import compile_all; compile_all()' \
     && useradd --create-home --uid 1000 wallmap \

@@ -54,6 +54,9 @@ from wallmap.common.grid_labels import (
 
 Array = NDArray[np.float64]
 PAD = 8  # cells of grid kept around everything known
+TRIM_GAP = (
+    0.3  # m unseen within a door bridged where wider gaps would leave no wall (``door_span``)
+)
 GAP_REACH = 2.5  # m past a wall's end along its line where an end across it is in its gap
 GAP_ANGLE = 45.0  # deg: an end's wall this far from another's line runs across it
 
@@ -824,24 +827,27 @@ def door_span(grid: _Grid, span: Opening, door_min: float) -> tuple[Array, Array
     span of door and unmapped wall. Nothing is seen through the wall, so its stretch at one end
     of the span is unseen: the longer unseen end, if ``door_min`` or more, is cut off. The
     other end's unseen stretch is door beside its jamb that no ray happened to cross (floor
-    by a jamb is often hidden from every view the robot had). An unseen gap narrower than
-    ``door_min`` between two crossed stretches is bridged: rays cross a door's floor sparsely,
-    at a slant, and leave such gaps; glass between two doors is seldom so narrow.
+    by a jamb is often hidden from every view the robot had).
+
+    Rays cross a door's floor sparsely, at a slant, and leave patches unseen within it: gaps
+    narrower than a door (``door_min``) between crossed stretches are bridged, if an unseen
+    end as long as a door still remains to be the missing wall; else only gaps up to
+    ``TRIM_GAP``. (Floor along glass is crossed too, by rays through it from the next room:
+    a door whose unseen patch is bridged there would take in the glass.)
     """
     steps = max(3, math.ceil(2 * span.width / grid.cell))
     t = np.linspace(0.0, 1.0, steps)
     i, j, ok = grid.local(span.p0 + t[:, None] * (span.p1 - span.p0))
     at = np.flatnonzero(ok & grid.free[i, j])
-    if not len(at):
-        return span.p0, span.p1
-    bridge = math.ceil(door_min / (span.width / (steps - 1)))
-    runs = np.split(at, np.flatnonzero(np.diff(at) > bridge) + 1)
-    run = max(runs, key=lambda r: r[-1] - r[0])
-    before, after = t[run[0]], 1.0 - t[run[-1]]  # unseen at each end, shares of the span
-    if max(before, after) * span.width < door_min:
-        return span.p0, span.p1
-    lo, hi = (t[run[0]], 1.0) if before > after else (0.0, t[run[-1]])
-    return span.p0 + lo * (span.p1 - span.p0), span.p0 + hi * (span.p1 - span.p0)
+    for gap in (door_min, TRIM_GAP) if len(at) else ():
+        bridge = math.ceil(gap / (span.width / (steps - 1)))
+        runs = np.split(at, np.flatnonzero(np.diff(at) > bridge) + 1)
+        run = max(runs, key=lambda r: r[-1] - r[0])
+        before, after = t[run[0]], 1.0 - t[run[-1]]  # unseen at each end, shares of the span
+        if max(before, after) * span.width >= door_min:
+            lo, hi = (t[run[0]], 1.0) if before > after else (0.0, t[run[-1]])
+            return span.p0 + lo * (span.p1 - span.p0), span.p0 + hi * (span.p1 - span.p0)
+    return span.p0, span.p1
 
 
 def _sides(

@@ -163,6 +163,21 @@ def test_a_patch_of_a_door_no_ray_crossed_is_still_door() -> None:
     assert p1 == pytest.approx([6.05, 1.6], abs=0.06)
 
 
+def test_a_patch_is_not_bridged_where_it_would_leave_no_wall_unseen() -> None:
+    """Strip seed 2: a 3.4 m divider span, the door its first 1.6 m, the rest glass whose floor
+    rays from the next room crossed. Unseen: 0.5 m after the first 0.1 m, and the last 0.2 m.
+    Bridged, no unseen stretch would be left for the missing wall, and no divider; so only
+    gaps up to 0.3 m are, and the 0.5 m patch stays the unseen end (the door found is wrong,
+    but the span still divides the rooms)."""
+    y = np.arange(0.01, 3.25, 0.02)
+    crossed = np.stack([np.full(len(y), 6.05), y], axis=1)[(y < 0.1) | (y > 0.6)]
+    free = FreeSpace()
+    free.add_points(np.concatenate([crossed, crossed]))
+    span = Opening(4, np.array([6.05, 0.0]), np.array([6.05, 3.44]))
+    p0, p1 = door_span(_Grid(free, _Segments.of([])), span, RoomsConfig().door_min)
+    assert [p0[1], p1[1]] == pytest.approx([0.6, 3.44], abs=0.06)
+
+
 def test_a_passages_jamb_another_end_opens_onto_is_still_the_passages() -> None:
     """Open-plan seed 502: a 2.8 m passage in the divider (x = 6.05); beyond it the room's
     wall leaves the divider's foot at 45 degrees as 3 m of glass, and the solid wall after the
