@@ -89,11 +89,15 @@ class FreeSpace:
         if not len(points):
             return
         cells = np.floor(points / self.cell).astype(np.int64)
-        self._cover(cells.min(axis=0), cells.max(axis=0))
-        i, j = (cells - self.origin).T
-        shape = self.counts.shape
+        low, high = cells.min(axis=0), cells.max(axis=0)
+        self._cover(low, high)
+        # Counted over the points' own box of the grid, not all of it: a frame or two at a time.
+        i, j = (cells - low).T
+        shape = tuple((high - low + 1).tolist())
         added = np.bincount(i * shape[1] + j, minlength=shape[0] * shape[1]).reshape(shape)
-        self.counts = np.minimum(self.counts + np.minimum(added, 255), 255).astype(np.uint8)
+        at = low - self.origin
+        box = self.counts[at[0] : at[0] + shape[0], at[1] : at[1] + shape[1]]
+        box[...] = np.minimum(box + np.minimum(added, 255), 255)
 
     def _cover(self, low: NDArray[np.int64], high: NDArray[np.int64]) -> None:
         """Grow the grid (by ``GROW`` cells a side at least) to hold cells ``low``..``high``."""

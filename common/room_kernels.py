@@ -33,11 +33,12 @@ def _root(parent: NDArray[np.int32], k: int) -> int:
 def label4(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int32], int]:
     """4-connected components of ``mask``: labels 0..n-1 (-1 outside), and n.
 
-    Components are numbered by their first cell, row-major.
-    One pass gives each cell its upper or left neighbour's provisional label (a new one if it
-    has neither), joining the two trees where both are labelled; the smaller root stays, so a
-    component's root is its first label, made at its first cell. A second pass numbers the
-    roots in order and relabels.
+    Components are numbered by their first cell, row-major. One pass gives each cell its upper
+    or left neighbour's provisional label (a new one if it has neither), joining the two trees
+    where both are labelled; the smaller root stays, so a component's root is its first label,
+    made at its first cell. A second pass numbers the roots in order and relabels. A cell with
+    a new label has no labelled neighbour above or to its left, so no two such cells touch:
+    half the cells, rounded up, at most.
     """
     rows, cols = mask.shape
     labels = np.full((rows, cols), -1, dtype=np.int32)

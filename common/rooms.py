@@ -332,11 +332,13 @@ def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) ->
     used = {_end_key(span.p0) for span in spans}
     among = ends.left_open(used)
     point = ends.point[among]
-    gap = point[None, :] - point[:, None]  # (i, j): from end i to end j
-    dist = np.hypot(gap[..., 0], gap[..., 1])
-    i, j = np.nonzero(np.triu((dist > config.door_max) & (dist <= config.passage_max), 1))
-    (gx, gy), dist = gap[i, j].T, dist[i, j]
-    i, j = among[i], among[j]
+    reach = config.passage_max
+    i, j = compiled.room_kernels().near_pairs(point, point - reach, point + reach)
+    i, j = i[i < j], j[i < j]
+    (gx, gy) = (point[j] - point[i]).T  # from end i to end j
+    dist = np.hypot(gx, gy)
+    apart = (dist > config.door_max) & (dist <= reach)
+    i, j, gx, gy, dist = among[i[apart]], among[j[apart]], gx[apart], gy[apart], dist[apart]
     (ox, oy), (px, py) = ends.outward[i].T, ends.outward[j].T
     cos_min = math.cos(math.radians(config.passage_angle))
     facing = ((gx * ox + gy * oy) / dist >= cos_min) & (-(gx * px + gy * py) / dist >= cos_min)
