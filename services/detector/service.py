@@ -18,7 +18,7 @@ from zenoh.ext import AdvancedPublisher
 
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
-from wallmap.common.compiled import compile_all
+from wallmap.common.compiled import compile_detector
 from wallmap.common.delivery import (
     declare_history_publisher,
     frames_in_turn,
@@ -49,7 +49,7 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     detector = WallDetector(config)
-    took = compile_all()
+    took = compile_detector()
     if took > 1.0:
         log.info("compiled the line search in %.1f s (once; cached for later starts)", took)
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)

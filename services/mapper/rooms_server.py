@@ -14,7 +14,6 @@ import threading
 
 import zenoh
 
-from wallmap.common import compiled
 from wallmap.common.codec import encode_as
 from wallmap.common.map_requests import reply_in_format
 from wallmap.common.runtime import Stats, drain
@@ -80,9 +79,6 @@ class RoomsServer:
         # so the frames, which share the interpreter, keep going. Frames coming faster than any
         # sensor gives them (a recording played --fast) are left to go first, up to MAX_DEFER:
         # the rooms follow once they pause, and a query gets them current anyway.
-        # Its compiled loops loaded now, before frames come, not in the middle of the first
-        # update (numba's import and cache: a few tenths of a second, holding the interpreter).
-        compiled.room_kernels().warm_up()
         frames, deferred = self._frames(), 0.0
         while not stop.wait(period := max(ROOMS_PERIOD, BUSY_SHARE * self._mapping.rooms.seconds)):
             now = self._frames()

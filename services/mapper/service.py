@@ -15,6 +15,7 @@ from typing import Any
 
 import zenoh
 
+from wallmap.common import compiled
 from wallmap.common.codec import MessageError, encode
 from wallmap.common.delivery import HistorySubscription, subscribe_with_history
 from wallmap.common.frame_order import ACK_EVERY
@@ -59,6 +60,10 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     core = restore(mapper, stats, log)
+    # The rooms' compiled loops loaded before the mapper says it is ready: loaded at the first
+    # rooms update instead, numba's import and cache (a few tenths of a second of CPU) fell
+    # among a short recording's frames and slowed them.
+    compiled.room_kernels().warm_up()
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
