@@ -54,9 +54,7 @@ from wallmap.common.grid_labels import (
 
 Array = NDArray[np.float64]
 PAD = 8  # cells of grid kept around everything known
-TRIM_GAP = (
-    0.3  # m unseen within a door bridged where wider gaps would leave no wall (``door_span``)
-)
+TRIM_GAP = 0.3  # m of a door unseen, bridged where wider gaps would leave no wall (door_span)
 GAP_REACH = 2.5  # m past a wall's end along its line where an end across it is in its gap
 GAP_ANGLE = 45.0  # deg: an end's wall this far from another's line runs across it
 

@@ -63,7 +63,10 @@ def run(
     # The rooms' compiled loops loaded before the mapper says it is ready: loaded at the first
     # rooms update instead, numba's import and cache (a few tenths of a second of CPU) fell
     # among a short recording's frames and slowed them.
+    started = time.perf_counter()
     compiled.room_kernels().warm_up()
+    if (took := time.perf_counter() - started) > 1.0:
+        log.info("compiled the rooms' loops in %.1f s (once; cached for later starts)", took)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
