@@ -8,6 +8,7 @@ acknowledgements go out on their own threads; the state file is saved from the m
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -42,6 +43,18 @@ ACK_REPEAT = 1.0  # s between two repeats of the newest run's acknowledgement...
 REPEAT_FOR = 30.0  # ...for this long after it last moved
 
 
+def _load_room_loops(log: logging.Logger) -> None:
+    """The rooms' compiled loops, loaded before the mapper says it is ready.
+
+    Loaded at the first rooms update instead, numba's import and cache (a few tenths of a
+    second of CPU) fell among a short recording's frames and slowed them.
+    """
+    started = time.perf_counter()
+    compiled.room_kernels().warm_up()
+    if (took := time.perf_counter() - started) > 1.0:
+        log.info("compiled the rooms' loops in %.1f s (once; cached for later starts)", took)
+
+
 def run(
     settings: ZenohSettings,
     mapper: MapperSettings,
@@ -60,13 +73,7 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     core = restore(mapper, stats, log)
-    # The rooms' compiled loops loaded before the mapper says it is ready: loaded at the first
-    # rooms update instead, numba's import and cache (a few tenths of a second of CPU) fell
-    # among a short recording's frames and slowed them.
-    started = time.perf_counter()
-    compiled.room_kernels().warm_up()
-    if (took := time.perf_counter() - started) > 1.0:
-        log.info("compiled the rooms' loops in %.1f s (once; cached for later starts)", took)
+    _load_room_loops(log)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
