@@ -195,7 +195,7 @@ class _Ends:
 
     def left_open(self, used: set[tuple[float, ...]]) -> NDArray[np.int64]:
         """The ends that are no end of a span found (``used``, as ``_end_key``s)."""
-        keys = map(tuple, np.round(self.point, 3).tolist())
+        keys = _keys(self.point)
         return np.array([k for k, key in enumerate(keys) if key not in used], dtype=np.int64)
 
 
@@ -327,7 +327,7 @@ def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) ->
     end another's span only reaches (a glass wall's neighbour opening onto it) may still be a
     passage's.
     """
-    used = {_end_key(span.p0) for span in spans}
+    used = set(_keys([span.p0 for span in spans]))
     among = ends.left_open(used)
     point = ends.point[among]
     reach = config.passage_max
@@ -376,9 +376,13 @@ def _end_key(point: Array) -> tuple[float, ...]:
 
 
 def _ends_of(spans: Sequence[Opening]) -> set[tuple[float, ...]]:
-    """The ends of ``spans`` as keys (``_end_key``), rounded all at once."""
-    ends = np.array([p for s in spans for p in (s.p0, s.p1)]).reshape(-1, 2)
-    return set(map(tuple, np.round(ends, 3).tolist()))
+    """The ends of ``spans`` as keys (``_end_key``)."""
+    return set(_keys([p for s in spans for p in (s.p0, s.p1)]))
+
+
+def _keys(points: Sequence[Array] | Array) -> list[tuple[float, ...]]:
+    """Points as keys (``_end_key``), rounded all at once."""
+    return list(map(tuple, np.round(np.reshape(points, (-1, 2)), 3).tolist()))
 
 
 def _crossing(p: Array, q: Array, a: Array, b: Array, own: NDArray[np.int64]) -> NDArray[np.bool_]:
