@@ -91,15 +91,21 @@ class CatchUpInbox:
     mid-run so takes the frames as the first one did, and its noise learning (``NoiseLevel``)
     comes to the frames the mapper still needs as it was: a live frame taken first, with the
     learning not yet warm, gave the map a wall more (seen: one restart under load in ten).
+    The inbox asks as it is made: a receive begun before the question (the service's drainer,
+    waiting on the channel) would take the next live sample ahead of the whole window.
     """
 
-    def __init__(self, channel: zenoh.handlers.Handler[zenoh.Sample]) -> None:
+    def __init__(
+        self,
+        channel: zenoh.handlers.Handler[zenoh.Sample],
+        session: zenoh.Session,
+        key: str,
+        history: HistorySettings,
+    ) -> None:
+        """Ask every cache of ``key`` for its window; the answer comes in the background."""
         self._channel = channel
         self._fetched: collections.deque[zenoh.Sample] = collections.deque()
         self._asking = threading.Event()
-
-    def ask(self, session: zenoh.Session, key: str, history: HistorySettings) -> None:
-        """Query every cache of ``key`` for its window; the answer comes in the background."""
         self._asking.set()
         selector = f"{key}/@adv/**?_max={history.samples()};_time=[now(-{history.seconds:g}s)..]"
         session.get(
@@ -185,11 +191,10 @@ def subscribe_with_history(
         recovery=ext.RecoveryConfig(heartbeat=True, periodic_queries=None),
         subscriber_detection=True,
     )
-    inbox = CatchUpInbox(subscriber.handler)
+    inbox = CatchUpInbox(subscriber.handler, session, key, history)
     drainer = threading.Thread(target=drain, args=(inbox,), daemon=True)
     drainer.start()
     misses = subscriber.sample_miss_listener(lambda miss: on_miss(miss.nb))
-    inbox.ask(session, key, history)
     return HistorySubscription(subscriber, misses, drainer)
 
 

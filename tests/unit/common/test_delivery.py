@@ -85,7 +85,8 @@ def test_frames_of_a_player_that_sends_again_are_never_skipped(local) -> None:
 
 def test_a_service_catching_up_takes_the_window_before_the_live_stream() -> None:
     """A live frame already waiting when the service asks the caches for the window comes
-    after the window's frames: a restarted detector takes them in the order they were sent."""
+    after the window's frames: a restarted detector takes them in the order they were sent,
+    its drainer receiving from the moment the inbox exists, before any answer is in."""
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -97,11 +98,13 @@ def test_a_service_catching_up_takes_the_window_before_the_live_stream() -> None
         points = np.zeros((1, 3, 3), np.float32)
         publisher.put(pack(Frame("r", 20, 21.0, "cam", points, np.eye(4), "depth", False)))
         time.sleep(0.2)  # the live frame waits in the channel
-        inbox = CatchUpInbox(subscriber.handler)
-        inbox.ask(session, KEY, WINDOW)
-        stats = Stats(logging.getLogger("test"))
-        turns = frames_in_turn(inbox, stats, WINDOW)
-        assert [next(turns).seq for _ in range(21)] == list(range(21))
+        inbox = CatchUpInbox(subscriber.handler, session, KEY, WINDOW)
+        taken: list[int] = []
+        turns = frames_in_turn(inbox, Stats(logging.getLogger("test")), WINDOW)
+        drainer = threading.Thread(target=lambda: taken.extend(next(turns).seq for _ in range(21)))
+        drainer.start()
+        drainer.join(5.0)
+        assert taken == list(range(21))
         subscriber.undeclare()
         publisher.undeclare()
 
