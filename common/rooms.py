@@ -6,6 +6,7 @@ on a grid of ``FreeSpace``'s cells:
 1. **Openings.** Every end of a wall's segment that stops short of the next wall (or of the
    next segment of its own wall) leaves an opening: the shortest span from that end, roughly
    along its wall (``door_angle``), to another wall's end or face, at most ``door_max`` long.
+   Walls under ``standing_max`` across that meet no longer wall (a pillar) open nothing.
    Spans under ``door_min`` are gaps in the masonry (a corner not quite seen): closed as wall.
    Longer ones are door candidates, and closed too while the floor is divided. Two ends
    facing each other across a wider gap in one line of wall (up to ``passage_max``) make a
@@ -81,6 +82,8 @@ class RoomsConfig:
         blind_seen: share of a span's cells seen free beyond which it is a passage, not glass.
         divider_min: shortest piece of wall (m) whose end may start a divider's span.
         divider_max: longest divider's span (m): a passage and the unmapped wall beside it.
+        standing_max: widest piece of wall (m) that no longer wall meets to be free-standing
+            (a pillar, a cupboard's side): an obstacle, where no opening starts or ends.
     """
 
     door_min: float = 0.6
@@ -100,6 +103,7 @@ class RoomsConfig:
     blind_seen: float = 0.1
     divider_min: float = 1.0
     divider_max: float = 5.0
+    standing_max: float = 0.6
 
 
 @dataclass(frozen=True)
@@ -218,34 +222,97 @@ def _foot(points: Array, a: Array, b: Array) -> Array:
     return a + t[:, None] * (b - a)
 
 
-def _free_ends(segments: _Segments, joint: float) -> _Ends:
-    """The ends of every segment not within ``joint`` of another segment (a corner, a T)."""
+def _joins(segments: _Segments, joint: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (end k, segment s) where an end meets another segment: a corner, a T.
+
+    End k is of the segments' first ends, then their second ends; within ``joint`` of s.
+    """
+    a, b = segments.a, segments.b
+    if len(a) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    point, piece = np.concatenate([a, b]), np.tile(np.arange(len(a)), 2)
+    k, s = _near(point, a, b, joint)
+    k, s = k[s != piece[k]], s[s != piece[k]]
+    gap = np.hypot(*(_foot(point[k], a[s], b[s]) - point[k]).T)
+    return k[gap < joint], s[gap < joint]
+
+
+def _free_ends(
+    segments: _Segments,
+    joint: float,
+    joins: tuple[NDArray[np.int64], NDArray[np.int64]],
+    standing: NDArray[np.bool_],
+) -> _Ends:
+    """The ends of every segment no other segment ``joins`` (a corner, a T).
+
+    Free-standing pieces (``standing``) are left out, as ends and as segments: no opening
+    starts or ends at a pillar, whose faces would otherwise cut a room with false doors.
+    """
     a, b = segments.a, segments.b
     point = np.concatenate([a, b])
     outward = np.concatenate([a - b, b - a])
     piece = np.tile(np.arange(len(a)), 2)
     norm = np.hypot(outward[:, 0], outward[:, 1])
-    if len(a) < 2:
-        keep = np.zeros(len(point), dtype=bool)
-    else:
-        k, s = _near(point, a, b, joint)
-        k, s = k[s != piece[k]], s[s != piece[k]]
-        gap = np.hypot(*(_foot(point[k], a[s], b[s]) - point[k]).T)
-        joined = np.zeros(len(point), dtype=bool)
-        joined[k[gap < joint]] = True
-        keep = (norm > 1e-9) & ~joined
+    joined = np.zeros(len(point), dtype=bool)
+    joined[joins[0]] = True
+    keep = (norm > 1e-9) & ~joined & ~standing[piece]
     open_at = keep.reshape(2, -1)  # (a end, b end) of each segment: not joined to a wall
     keep[keep] = ~_in_a_gap(
         point[keep], outward[keep] / norm[keep, None], piece[keep], a, b, joint, open_at
     )
+    solid = np.cumsum(~standing) - 1  # a segment's index among those not free-standing
     return _Ends(
         wall=segments.wall[piece[keep]],
-        piece=piece[keep],
+        piece=solid[piece[keep]],
         point=point[keep],
         outward=outward[keep] / norm[keep, None],
-        a=a,
-        b=b,
+        a=a[~standing],
+        b=b[~standing],
     )
+
+
+def _free_standing(
+    segments: _Segments, joins: tuple[NDArray[np.int64], NDArray[np.int64]], most: float
+) -> NDArray[np.bool_]:
+    """Per segment, whether its piece of wall stands free in a room: a pillar, a cupboard's side.
+
+    Walls under ``most`` across, joined (``joins``) to no longer wall, together under ``most``
+    across. (A depth camera sees metres of a building's wall at once: a piece this short on
+    its own is an object in the room.) Only short walls can be part of one, so the pieces are
+    put together from those alone.
+    """
+    a, b, owner = segments.a, segments.b, segments.owner
+    n = int(owner.max()) + 1 if len(owner) else 0
+    low, high = np.full((n, 2), np.inf), np.full((n, 2), -np.inf)
+    for ends in (a, b):
+        np.minimum.at(low, owner, ends)
+        np.maximum.at(high, owner, ends)
+    short = np.hypot(*(high - low).T) < most
+    parent = {int(w): int(w) for w in np.flatnonzero(short)}
+
+    def root(w: int) -> int:
+        while parent[w] != w:
+            parent[w] = parent[parent[w]]
+            w = parent[w]
+        return w
+
+    attached = []  # short walls joined to a longer one
+    pairs = owner[np.tile(np.arange(len(a)), 2)[joins[0]]], owner[joins[1]]
+    for v, w in zip(*(side.tolist() for side in pairs), strict=True):
+        if short[v] and short[w]:
+            parent[root(v)] = root(w)
+        elif short[v] or short[w]:
+            attached.append(v if short[v] else w)
+    pieces: dict[int, list[int]] = {}
+    for w in parent:
+        pieces.setdefault(root(w), []).append(w)
+    for w in attached:
+        pieces.pop(root(w), None)
+    standing = np.zeros(n, dtype=bool)
+    for members in pieces.values():
+        if np.hypot(*(high[members].max(axis=0) - low[members].min(axis=0))) < most:
+            standing[members] = True
+    return standing[owner]
 
 
 def _in_a_gap(
@@ -472,8 +539,10 @@ def find_rooms(
         return Layout([], [])
     radius = max(config.barrier, 0.75 * grid.cell)  # no 4-connected path slips through a line
     drawn = np.zeros(grid.shape, dtype=bool)
-    ends = _free_ends(segments, config.joint)
-    grid.draw(drawn, ends.a, ends.b, radius)
+    joins = _joins(segments, config.joint)
+    standing = _free_standing(segments, joins, config.standing_max)
+    ends = _free_ends(segments, config.joint, joins, standing)
+    grid.draw(drawn, segments.a, segments.b, radius)
     spans = [o for o in openings(ends, config) if o.width > 0]
     spans += passages(ends, config, spans)
     dividers = _divider_spans(grid, ends, spans, config)

@@ -19,6 +19,7 @@ from wallmap.common.rooms import (
     _free_ends,
     _goes_on_along,
     _Grid,
+    _joins,
     _Segments,
     door_span,
     find_rooms,
@@ -344,14 +345,40 @@ def test_a_crossing_narrower_than_a_door_beside_glass_is_no_door() -> None:
     assert all(np.hypot(*(d.p1 - d.p0)) >= RoomsConfig().door_min for d in layout.doors)
 
 
+def _ends_of(walls: list[Wall]):
+    """The free ends of ``walls``, none of them free-standing."""
+    segments, joint = _Segments.of(_walls(walls)), RoomsConfig().joint
+    return _free_ends(segments, joint, _joins(segments, joint), np.zeros(len(segments.a), bool))
+
+
 def test_only_a_span_going_on_along_a_wall_may_lead_into_a_glimpse() -> None:
     """The corridor's span above meets its wall going on at 25 degrees. One cutting a room's
     corner (window scene, seed 500: from a side wall's end where glass begins, to the end of
     the wall across the room) meets that wall at 77 degrees: what is seen beyond it is the
     room's own floor before the glass, not a space beyond a door."""
     _, mapped = _corridor_with_a_closet()
-    ends = _free_ends(_Segments.of(_walls(mapped)), RoomsConfig().joint)
+    ends = _ends_of(mapped)
     assert _goes_on_along(ends, Opening(0, np.array([4.0, 0.05]), np.array(CORRIDOR[1])))
     room = [Wall(0, (0.0, 0.0), (0.0, 2.0)), Wall(1, (0.7, 5.0), (8.0, 5.0))]
-    ends = _free_ends(_Segments.of(_walls(room)), RoomsConfig().joint)
+    ends = _ends_of(room)
     assert not _goes_on_along(ends, Opening(0, np.array([0.0, 2.0]), np.array([0.7, 5.0])))
+
+
+def _pillar(x: float, y: float, side: float = 0.3) -> list[Wall]:
+    """A square pillar with its lower left corner at (x, y): four faces, as the plan's walls."""
+    c = [(x, y), (x + side, y), (x + side, y + side), (x, y + side)]
+    return [Wall(20 + k, c[k], c[(k + 1) % 4]) for k in range(4)]
+
+
+def test_a_pillar_in_a_room_makes_no_door_and_cuts_no_room() -> None:
+    """Clutter seed 500: a pillar's two mapped faces left ends whose spans (1.7 m to the wall
+    above, 1.25 m to the divider) cut a corner off the room, with two false doors. The robot
+    saw round it: it stands free, and opens nothing."""
+    solid = [Wall(4, (6.05, 0.0), (6.05, 0.5)), Wall(5, (6.05, 1.5), (6.05, 4.0))]
+    plan = FloorPlan(walls=tuple(_two_rooms(solid) + _pillar(4.5, 2.0)))
+    faces = [w for w in plan.walls if w.id in (20, 23)]  # its lower and left faces mapped
+    route = np.array([[1.0 + 0.1 * k, 1.0] for k in range(100)])
+    layout = find_rooms(_walls(_two_rooms(solid) + faces), _seen(plan, route))
+    assert sorted(round(room.area) for room in layout.rooms) == [24, 24]
+    (door,) = layout.doors
+    assert door.rooms == (0, 1)
