@@ -7,6 +7,7 @@ and checks what comes back; the server side (``answer_map_queries``) reads them 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -20,6 +21,8 @@ from wallmap.common.transport import Keys
 
 T = TypeVar("T")
 
+ASK_AGAIN = 0.2  # s between two asks while no mapper is up (``ask_mapper``'s ``wait``)
+
 
 class QueryError(RuntimeError):
     """No usable map came back; the message says why, in one line."""
@@ -30,9 +33,16 @@ class MalformedReplyError(QueryError):
 
 
 def fetch_map(
-    session: zenoh.Session, keys: Keys, query: MapQuery | None = None, *, timeout: float = 5.0
+    session: zenoh.Session,
+    keys: Keys,
+    query: MapQuery | None = None,
+    *,
+    timeout: float = 5.0,
+    wait: bool = False,
 ) -> MapReply:
     """Ask ``{prefix}/map/walls`` for the walls ``query`` selects; the reply, checked.
+
+    ``wait``: ask until a mapper answers, for up to ``timeout`` (``ask_mapper``).
 
     Raises:
         QueryError: no mapper answered, it refused the query, or its reply is unreadable.
@@ -41,38 +51,58 @@ def fetch_map(
     selector = keys.map_walls + (
         "?" + ";".join(f"{k}={v}" for k, v in params.items()) if params else ""
     )
-    return ask_mapper(session, selector, "map", MapReply.from_map, timeout)
+    return ask_mapper(session, selector, "map", MapReply.from_map, timeout, wait=wait)
 
 
 def ask_mapper(
-    session: zenoh.Session, selector: str, what: str, read: Callable[[Any], T], timeout: float
+    session: zenoh.Session,
+    selector: str,
+    what: str,
+    read: Callable[[Any], T],
+    timeout: float,
+    *,
+    wait: bool = False,
 ) -> T:
     """The first reply to ``selector``, decoded and ``read``; ``what`` names it in errors.
+
+    With no mapper up, Zenoh ends a query at once. ``wait``: ask again every ``ASK_AGAIN`` s
+    until one answers or ``timeout`` is up (a command run just after ``wallmap mapper &``, a
+    mapper restarting); else once (a service's periodic poll, which asks again anyway).
 
     Raises:
         QueryError: no mapper answered, or it refused the query.
         MalformedReplyError: the reply does not decode, or ``read`` refuses it (MessageError).
     """
-    for reply in session.get(selector, timeout=timeout):
-        if reply.ok is None:
-            msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
-            raise QueryError(msg)
-        try:
-            return read(decode(reply.ok.payload.to_bytes()))
-        except MessageError as err:
-            msg = f"the {what} reply is unreadable: {err}"
-            raise MalformedReplyError(msg) from err
+    deadline = time.monotonic() + timeout
+    while True:
+        left = max(deadline - time.monotonic(), 0.01)
+        for reply in session.get(selector, timeout=left):
+            if reply.ok is None:
+                msg = f"the mapper refused the query: {reply.err.payload.to_string()}"
+                raise QueryError(msg)
+            try:
+                return read(decode(reply.ok.payload.to_bytes()))
+            except MessageError as err:
+                msg = f"the {what} reply is unreadable: {err}"
+                raise MalformedReplyError(msg) from err
+        if not wait or time.monotonic() + ASK_AGAIN >= deadline:
+            break
+        time.sleep(ASK_AGAIN)
     msg = f"no mapper answered on {selector.split('?', maxsplit=1)[0]} within {timeout:.0f} s"
     raise QueryError(msg)
 
 
-def fetch_rooms(session: zenoh.Session, keys: Keys, *, timeout: float = 5.0) -> dict[str, Any]:
+def fetch_rooms(
+    session: zenoh.Session, keys: Keys, *, timeout: float = 5.0, wait: bool = False
+) -> dict[str, Any]:
     """Ask ``{prefix}/map/rooms``; the contract's payload, checked for its two lists.
+
+    ``wait``: ask until a mapper answers, for up to ``timeout`` (``ask_mapper``).
 
     Raises:
         QueryError: no mapper answered, it refused, or its reply is unreadable.
     """
-    return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout)
+    return ask_mapper(session, keys.map_rooms, "rooms", _rooms_body, timeout, wait=wait)
 
 
 def _rooms_body(body: Any) -> dict[str, Any]:

@@ -196,13 +196,13 @@ def _fetch(args: argparse.Namespace, config: Config, **parameters: str) -> MapRe
     parameters |= {"min_obs": str(args.min_obs), "tentative": str(args.tentative).lower()}
     query = MapQuery.from_parameters(parameters)
     with open_session(config.zenoh) as session:
-        return fetch_map(session, Keys(config.zenoh.prefix), query, timeout=args.timeout)
+        return fetch_map(session, Keys(config.zenoh.prefix), query, timeout=args.timeout, wait=True)
 
 
 def _fetch_rooms(args: argparse.Namespace, config: Config) -> dict[str, Any]:
     """The live rooms and doors (``{prefix}/map/rooms``)."""
     with open_session(config.zenoh) as session:
-        return fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout)
+        return fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout, wait=True)
 
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
@@ -355,7 +355,12 @@ def _add_map_filters(p: argparse.ArgumentParser, *, min_obs: int = 1) -> None:
         help="walls seen at least N times",
     )
     p.add_argument("--tentative", action="store_true", help="also walls not yet confirmed")
-    p.add_argument("--timeout", type=positive, default=5.0, help="seconds to wait for the mapper")
+    p.add_argument(
+        "--timeout",
+        type=positive,
+        default=5.0,
+        help="seconds to wait for a mapper to answer (asked again while none is up)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -32,8 +32,7 @@ def test_mapper_restart_on_its_state_file_keeps_walls_and_ids(stack, small_bag, 
     assert mapper.stop() == 0
     assert state.exists()
     stack.start("mapper-again", "mapper", "--state", str(state), *stack.zenoh_args)
-    time.sleep(1.0)
-    after = stack.query()
+    after = stack.query()  # asked again until the restarted mapper is up
     assert after["walls"] == before["walls"]
     assert after["frames"] == 60
     # New frames extend the same map; the ids stay.
@@ -44,6 +43,22 @@ def test_mapper_restart_on_its_state_file_keeps_walls_and_ids(stack, small_bag, 
     survivors = {merged: kept for merged, kept, _ in again["merges"]}
     ids = {w["id"] for w in again["walls"]}
     assert all(i in ids or survivors.get(i) in ids for i in (w["id"] for w in before["walls"]))
+
+
+@pytest.mark.e2e
+def test_query_waits_its_timeout_for_a_mapper_to_come_up(stack):
+    """`wallmap query --timeout S`: with no mapper up, Zenoh ends a query at once; the command
+    asks again until one answers, and gives up only after S seconds."""
+    started = time.monotonic()
+    alone = stack.run("query", "--timeout", "2", *stack.zenoh_args, expect=1)
+    assert time.monotonic() - started >= 2.0
+    assert "no mapper answered" in alone.stderr
+    query = stack.start("query", "query", "--json", "--timeout", "30", *stack.zenoh_args)
+    time.sleep(1.5)
+    assert query.proc.poll() is None, "still waiting for a mapper"
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    assert query.proc.wait(timeout=40) == 0, query.output()
+    assert json.loads(query.output())["frames"] == 0
 
 
 @pytest.mark.e2e
