@@ -652,10 +652,11 @@ def _divider_spans(
     length = np.hypot(*(ends.b - ends.a).T)
     found = []
     among = ends.left_open(used)
-    for span in openings(ends, config, config.divider_max, config.passage_angle, among):
-        if _end_key(span.p0) in used or span.width <= config.door_max:
+    for nearest in openings(ends, config, config.divider_max, config.passage_angle, among):
+        k = int(np.argmin(np.hypot(*(ends.point - nearest.p0).T)))  # the end it starts from
+        span = _along_its_line(ends, k, nearest, config.joint)
+        if _end_key(span.p0) in used or not config.door_max < span.width <= config.divider_max:
             continue
-        k = int(np.argmin(np.hypot(*(ends.point - span.p0).T)))  # the end it starts from
         if length[ends.piece[k]] < config.divider_min:
             continue  # a pillar's face, a cupboard's side: no divider
         door = door_span(grid, span, config.door_min)
@@ -665,6 +666,32 @@ def _divider_spans(
             found.append(dataclasses.replace(span, door=door))
             used |= _ends_of([span])
     return found
+
+
+def _along_its_line(ends: _Ends, k: int, span: Opening, reach: float) -> Opening:
+    """A divider's span from end ``k``, along the line of its own wall to the wall it meets.
+
+    The nearest point ahead (``openings``) may lie off that line: where the wall met was
+    mapped short of the corner (glass below it), the span runs up to 15 degrees off towards
+    its mapped end, into the next room, whose floor then looks like the door. Along the
+    line, the span ends where it meets that wall's line, on the wall or at most ``reach``
+    past its mapped end; else it stays as found.
+    """
+    _, s = _near(span.p1[None], ends.a, ends.b, 1e-6)
+    if not len(s):
+        return span
+    a, b = ends.a[s[0]], ends.b[s[0]]
+    d, e = ends.outward[k], b - a
+    denom = d[0] * e[1] - d[1] * e[0]
+    length = math.hypot(*e)
+    if abs(denom) < math.sin(math.radians(GAP_ANGLE)) * length:
+        return span  # nearly along it: no corner to meet
+    w = a - span.p0
+    t = (w[0] * e[1] - w[1] * e[0]) / denom  # along the end's line
+    u = (w[0] * d[1] - w[1] * d[0]) / denom  # along the wall met, in lengths of it
+    if t <= 0 or not -reach / length <= u <= 1 + reach / length:
+        return span
+    return dataclasses.replace(span, p1=span.p0 + t * d)
 
 
 def _blind_spans(

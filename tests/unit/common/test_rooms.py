@@ -382,3 +382,26 @@ def test_a_pillar_in_a_room_makes_no_door_and_cuts_no_room() -> None:
     assert sorted(round(room.area) for room in layout.rooms) == [24, 24]
     (door,) = layout.doors
     assert door.rooms == (0, 1)
+
+
+def test_a_divider_runs_along_its_own_line_to_a_leaning_wall() -> None:
+    """Glass seed 501: the wall a divider meets leans, so the nearest point of it ahead of the
+    divider's end (within 15 degrees) is its foot 0.3 m off the corner, in the next room. A span
+    there took that room's floor for the door, and lost the divider: one room, not two. Along
+    the divider's line, it meets the wall at the corner, and the door is where the robot went."""
+    walls = [
+        Wall(0, (0.0, 0.0), (12.1, 0.0)),
+        Wall(1, (12.1, 0.0), (12.1, 4.0)),
+        Wall(2, (12.1, 4.0), (6.05, 4.0)),
+        Wall(3, (6.05, 4.0), (0.0, 3.4)),  # leans 5.7 degrees
+        Wall(4, (0.0, 3.4), (0.0, 0.0)),
+        Wall(5, (6.05, 0.0), (6.05, 1.0)),
+        Wall(6, (6.05, 2.6), (6.05, 4.0), glass=True),
+    ]
+    route = np.array([[1.0 + 0.1 * k, 1.8] for k in range(100)])
+    mapped = [w for w in walls if not w.glass]
+    layout = find_rooms(_walls(mapped), _seen(FloorPlan(walls=tuple(walls)), route))
+    assert sorted(round(room.area) for room in layout.rooms) == [22, 24]
+    (door,) = layout.doors
+    assert door.p0 == pytest.approx([6.05, 1.0], abs=0.05)
+    assert door.p1 == pytest.approx([6.05, 2.6], abs=0.25)
