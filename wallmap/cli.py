@@ -170,7 +170,13 @@ def _cmd_ros2(_: argparse.Namespace, config: Config) -> int:
 
 def _cmd_odometry(_: argparse.Namespace, config: Config) -> int:
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
-    odometry_service.run(zenoh_settings, config.odometry, stop_on_signals(), config.history)
+    odometry_service.run(
+        zenoh_settings,
+        config.odometry,
+        stop_on_signals(),
+        rows=config.detector.rows,
+        history=config.history,
+    )
     return 0
 
 

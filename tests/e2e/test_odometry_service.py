@@ -47,6 +47,30 @@ def test_odometry_service_gives_the_mapper_its_poses(stack, odometry_scene) -> N
     assert "scan matching starts afresh" in odometry
 
 
+def test_odometry_takes_whole_depth_clouds_by_the_detectors_rows(stack, scene_bags) -> None:
+    """`player --whole-clouds`: the odometry cuts each depth frame to its scan row as the
+    detector does (its ``--rows``). It was handed the history window as the row choice, and
+    its worker died on the first frame (``'HistorySettings' object has no attribute 'band'``),
+    and ``--history`` was never its own."""
+    info = scene_bags("odometry-depth.bag", seed=607, n_frames=60, fmt="ros1", sensor="depth16")
+    for service in ("mapper", "detector", "odometry"):
+        stack.start(service, service, "--history", "5", *stack.zenoh_args)
+    played = stack.run(
+        "player",
+        str(info.path),
+        "--fast",
+        "--whole-clouds",
+        "--pose-source",
+        "none",
+        "--wait-for",
+        "detector,mapper,odometry",
+        *stack.zenoh_args,
+    )
+    assert played.returncode == 0, played.stderr
+    assert stack.query()["frames"] == 60
+    assert stack.counters("odometry")["published"] == 60
+
+
 def test_odometry_command_line_errors(stack) -> None:
     bad = stack.run("odometry", "--initial-pose", "1,2", *stack.zenoh_args, timeout=30, expect=2)
     assert "expected X,Y,YAW" in bad.stderr
