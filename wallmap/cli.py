@@ -12,10 +12,11 @@ import logging
 import math
 import os
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TypeVar
 
 import zenoh
 
@@ -101,6 +102,8 @@ FAILURES = (
     ValueError,
 )
 SERVICE = math.inf  # services wait for their router as long as it takes
+ASK_AT_LEAST = 0.5  # s a query has, whatever the wait for the router left of --timeout
+T = TypeVar("T")
 ALL = (
     ZENOH,
     HISTORY,
@@ -201,14 +204,25 @@ def _fetch(args: argparse.Namespace, config: Config, **parameters: str) -> MapRe
     """
     parameters |= {"min_obs": str(args.min_obs), "tentative": str(args.tentative).lower()}
     query = MapQuery.from_parameters(parameters)
-    with open_session(config.zenoh) as session:
-        return fetch_map(session, Keys(config.zenoh.prefix), query, timeout=args.timeout, wait=True)
+    keys = Keys(config.zenoh.prefix)
+    return _ask(args, config, lambda s, left: fetch_map(s, keys, query, timeout=left, wait=True))
 
 
 def _fetch_rooms(args: argparse.Namespace, config: Config) -> dict[str, Any]:
     """The live rooms and doors (``{prefix}/map/rooms``)."""
-    with open_session(config.zenoh) as session:
-        return fetch_rooms(session, Keys(config.zenoh.prefix), timeout=args.timeout, wait=True)
+    keys = Keys(config.zenoh.prefix)
+    return _ask(args, config, lambda s, left: fetch_rooms(s, keys, timeout=left, wait=True))
+
+
+def _ask(args: argparse.Namespace, config: Config, fetch: Callable[[zenoh.Session, float], T]) -> T:
+    """``fetch(session, seconds left)``: --timeout covers the wait for a router and a mapper.
+
+    A command run as the services start (``wallmap up &``, then ``wallmap query``) waits for
+    both, rather than failing at once.
+    """
+    started = time.monotonic()
+    with open_session(replace(config.zenoh, wait_for_router=args.timeout)) as session:
+        return fetch(session, max(args.timeout - (time.monotonic() - started), ASK_AT_LEAST))
 
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
@@ -365,7 +379,7 @@ def _add_map_filters(p: argparse.ArgumentParser, *, min_obs: int = 1) -> None:
         "--timeout",
         type=positive,
         default=5.0,
-        help="seconds to wait for a mapper to answer (asked again while none is up)",
+        help="seconds to wait for the router and a mapper to answer (asked again while none is up)",
     )
 
 

@@ -8,6 +8,7 @@ import time
 
 import pytest
 import zenoh
+from conftest import Stack, free_port
 
 from wallmap.common.codec import decode
 from wallmap.common.link_settings import ZenohSettings
@@ -59,6 +60,23 @@ def test_query_waits_its_timeout_for_a_mapper_to_come_up(stack):
     stack.start("mapper", "mapper", *stack.zenoh_args)
     assert query.proc.wait(timeout=40) == 0, query.output()
     assert json.loads(query.output())["frames"] == 0
+
+
+@pytest.mark.e2e
+def test_query_waits_its_timeout_for_the_router_too(tmp_path) -> None:
+    """`wallmap up &` then `wallmap query`: the query may start before the router listens."""
+    stack = Stack(tmp_path, f"tcp/127.0.0.1:{free_port()}", prefix="test/router-later")
+    try:
+        query = stack.start("query", "query", "--json", "--timeout", "30", *stack.zenoh_args)
+        time.sleep(1.5)
+        assert query.proc.poll() is None, "still waiting for a router"
+        stack.start("router", "router", "--listen", stack.endpoint)
+        stack.start("mapper", "mapper", *stack.zenoh_args)
+        assert query.proc.wait(timeout=40) == 0, query.output()
+        assert json.loads(query.output())["frames"] == 0
+    finally:
+        stack.stop_all()
+    stack.assert_all_clean()
 
 
 @pytest.mark.e2e
