@@ -104,6 +104,7 @@ FAILURES = (
 SERVICE = math.inf  # services wait for their router as long as it takes
 ASK_AT_LEAST = 0.5  # s a query has, whatever the wait for the router left of --timeout
 T = TypeVar("T")
+WALL_FILTERS = {"--bbox": "bbox", "--since": "since", "--tentative": "tentative"}
 ALL = (
     ZENOH,
     HISTORY,
@@ -227,6 +228,9 @@ def _ask(args: argparse.Namespace, config: Config, fetch: Callable[[zenoh.Sessio
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
     if args.rooms:
+        if given := [f for f, v in WALL_FILTERS.items() if getattr(args, v) not in (None, False)]:
+            msg = f"--rooms answers every room; {', '.join(given)}: walls only"
+            raise ValueError(msg)
         body = _fetch_rooms(args, config)
         print(json.dumps(body, indent=1) if args.json else format_rooms(body))
         return 0
@@ -498,7 +502,11 @@ def _add_map_commands(sub: Any) -> None:
     _add_map_filters(p)
     p.add_argument("--bbox", metavar="XMIN,YMIN,XMAX,YMAX", help="walls crossing this box (m)")
     p.add_argument("--since", type=float, metavar="STAMP", help="walls seen since this stamp")
-    p.add_argument("--rooms", action="store_true", help="the rooms and doors instead of the walls")
+    p.add_argument(
+        "--rooms",
+        action="store_true",
+        help="all the rooms and doors instead of the walls (not with --bbox, --since, --tentative)",
+    )
 
     p = add_command(sub, "status", "the live services and their counters", _cmd_status, ZENOH)
     p.add_argument("--json", action="store_true", help="JSON instead of a table")
@@ -538,13 +546,15 @@ def _add_scene_command(sub: Any) -> None:
     )
     p.add_argument("out", type=Path, metavar="OUT", help="bag file (ROS 1) or folder (ROS 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the floor plan and the drive")
-    p.add_argument("--frames", type=int, default=600, help="most frames (the drive may end first)")
+    p.add_argument(
+        "--frames", type=positive_int, default=600, help="most frames (the drive may end first)"
+    )
     p.add_argument("--format", choices=("ros1", "ros2-mcap", "ros2-sqlite3"), default="ros1")
     p.add_argument(
         "--sensor", choices=("pointcloud", "depth16", "depth32", "laserscan"), default="pointcloud"
     )
-    p.add_argument("--width", type=int, default=160, help="image width (px)")
-    p.add_argument("--height", type=int, default=120, help="image height (px)")
+    p.add_argument("--width", type=positive_int, default=160, help="image width (px)")
+    p.add_argument("--height", type=positive_int, default=120, help="image height (px)")
     p.add_argument("--rate", type=positive, default=15.0, help="frames per second")
     p.add_argument("--compress", action="store_true", help="LZ4 chunks (ROS 1)")
     p.add_argument(

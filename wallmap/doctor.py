@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from wallmap.arg_types import positive_int
 from wallmap.config import Config
 from wallmap.doctor_facts import Report
 from wallmap.doctor_inspect import inspect_bag, inspect_latency, inspect_tum
@@ -75,7 +76,7 @@ def add_command(sub: Any) -> None:
     )
     p.add_argument(
         "--latency-frames",
-        type=int,
+        type=positive_int,
         default=400,
         metavar="N",
         help="frames the latency is estimated from",
