@@ -40,7 +40,13 @@ def _cmd_doctor(args: argparse.Namespace, config: Config) -> int:
     if is_tum_folder(args.bag):
         report = inspect_tum(args.bag, source)
     else:
-        report = inspect_bag(args.bag, source.sensor_topic, source.pose_source)
+        report = inspect_bag(
+            args.bag,
+            source.sensor_topic,
+            source.pose_source,
+            level=source.level,
+            floor_z=source.floor_z,
+        )
     if args.latency and report.verdict.status == "ready":
         report.latency = inspect_latency(args.bag, config, args.latency_frames)
     print(report_json(report) if args.json else render_text(report))

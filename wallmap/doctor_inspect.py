@@ -32,12 +32,18 @@ from wallmap.services.player.bag_contents import BagContents, Stamps, read_conte
 from wallmap.services.player.bag_file import BagFile
 from wallmap.services.player.choices import SensorChoice, SensorRefusal, choose_sensor
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.placement import LevelMode
 from wallmap.services.player.sources import SourceSettings
 from wallmap.services.player.tum_folder import OPTICAL_FRAME, SENSOR_TYPE, TumFolder
 
 
 def inspect_bag(
-    path: Path, sensor_topic: str | None = None, pose_source: str | None = None
+    path: Path,
+    sensor_topic: str | None = None,
+    pose_source: str | None = None,
+    *,
+    level: LevelMode = "auto",
+    floor_z: float | None = None,
 ) -> Report:
     """Inspect a bag as the player would open it, and say what it would use.
 
@@ -45,6 +51,8 @@ def inspect_bag(
         path: ROS 1 .bag file, ROS 2 bag folder, or ROS 2 .mcap file.
         sensor_topic: The ``--sensor-topic`` the player would be given, if any.
         pose_source: The ``--pose-source`` it would be given, if any: the verdict is for it.
+        level: The ``--level`` it would be given: each pose source's placement is made so.
+        floor_z: The ``--floor-z`` it would be given, if any.
 
     Returns:
         The report; ``readable`` is False (and the verdict gives the player's reason) when the
@@ -57,7 +65,8 @@ def inspect_bag(
     file = file_facts(path)
     try:
         with BagFile(path) as bag:
-            return _inspect(Report(path=str(path), file=file), bag, sensor_topic, pose_source)
+            report = Report(path=str(path), file=file)
+            return _inspect(report, bag, sensor_topic, pose_source, (level, floor_z))
     except PlayerError as err:  # the player's reason: a file it cannot read, a damaged chunk
         return _refuse(Report(path=str(path), file=file), str(err))
 
@@ -70,9 +79,15 @@ def _refuse(report: Report, reason: str) -> Report:
 
 
 def _inspect(
-    report: Report, bag: BagFile, requested: str | None, asked: str | None = None
+    report: Report,
+    bag: BagFile,
+    requested: str | None,
+    asked: str | None,
+    placing: tuple[LevelMode, float | None],
 ) -> Report:
     """Read the bag's contents once, make the player's choices and report them.
+
+    ``placing``: the ``--level`` and ``--floor-z`` the player would be given.
 
     Raises:
         PlayerError: A damaged chunk or sensor frame, where the player would stop too.
@@ -86,7 +101,7 @@ def _inspect(
     report.readable = True
     _fill(report, contents, facts, stamps)
     if isinstance(sensor, SensorChoice):
-        judge_poses(report.poses, bag, contents, sensor)
+        judge_poses(report.poses, bag, contents, sensor, *placing)
     several = isinstance(sensor, SensorRefusal) and bool(sensor.candidates)
     report.verdict, chosen = bag_verdict(report, requested, several=several, asked=asked)
     # What the player would warn about when run as recommended (with no poses: as `none`).

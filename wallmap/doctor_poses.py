@@ -23,6 +23,7 @@ from wallmap.services.player.choices import (
     plan_playback,
 )
 from wallmap.services.player.errors import Refusal
+from wallmap.services.player.placement import LevelMode
 from wallmap.services.player.pose_choice import FIXED_FRAMES, POSE_TOLERANCE, default_source
 from wallmap.services.player.pose_sources import BAG_DEFAULT, PoseTrack, parse_pose_source
 
@@ -110,13 +111,19 @@ def pose_facts(
 
 
 def judge_poses(
-    poses: list[PoseFacts], bag: BagFile, contents: BagContents, sensor: SensorChoice
+    poses: list[PoseFacts],
+    bag: BagFile,
+    contents: BagContents,
+    sensor: SensorChoice,
+    level: LevelMode = "auto",
+    floor_z: float | None = None,
 ) -> None:
     """Whether the player plays with each pose source ("ok") or its refusal, and what it says.
 
     The player's warnings with a source and how it places the frames (the level of the fixed
-    frame, its floor, the band the sensor sees) are kept. The frames the survey looks at are
-    the same for every source, so they are read once.
+    frame, its floor, the band the sensor sees; with ``level`` and ``floor_z`` as the player
+    is given them) are kept. The frames the survey looks at are the same for every source, so
+    they are read once.
 
     Raises:
         PlayerError: The surveyed frames cannot be read (a damaged chunk).
@@ -136,7 +143,7 @@ def judge_poses(
             continue
         if surveyed is None and plan.surveys:
             surveyed = read_survey_frames(bag, sensor)
-        placed = choose_placement(plan, surveyed or [])
+        placed = choose_placement(plan, surveyed or [], level, floor_z)
         if isinstance(placed, Refusal):
             pose.player = placed.reason
             continue

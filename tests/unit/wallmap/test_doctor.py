@@ -524,3 +524,17 @@ def test_the_pose_source_given_is_the_one_judged(tmp_path: Path) -> None:
     assert verdicts["odom"] == (0, "ready", f"ready: `wallmap up {path} --fast --pose-source odom`")
     assert verdicts["pose:/amcl_pose"][:2] == (0, "ready")
     assert inspect_bag(info.path).verdict.text == f"ready: `wallmap up {path} --fast`"
+
+
+def test_the_level_and_floor_given_are_the_ones_the_placement_is_made_with(tmp_path: Path) -> None:
+    """`wallmap doctor BAG --level none --floor-z Z`: each source placed as the player would be
+    told to (they were read, and the placement made with the defaults)."""
+    info = write_scene_bag(
+        tmp_path / "scene.bag", seed=11, n_frames=30, fmt="ros1", sensor="depth16"
+    )
+    found = inspect_bag(info.path).poses[0].placement
+    given = inspect_bag(info.path, level="none", floor_z=0.5).poses[0].placement
+    assert "floor at" in found
+    assert given is not None
+    assert "floor at" not in given, "the floor given, not found"
+    assert "level" not in given, "taken as it is"
