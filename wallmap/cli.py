@@ -120,6 +120,7 @@ ALL = (
     ODOMETRY,
     UP,
     VIEW,
+    ROS2_TOPICS,
 )
 
 
@@ -350,8 +351,8 @@ def _cmd_export(args: argparse.Namespace, config: Config) -> int:
     return 0
 
 
-def _cmd_demo(args: argparse.Namespace, _: Config) -> int:
-    return demo(args.out)
+def _cmd_demo(args: argparse.Namespace, config: Config) -> int:
+    return demo(args.out, config)
 
 
 def _cmd_config(_: argparse.Namespace, config: Config) -> int:
@@ -542,7 +543,11 @@ def _add_map_commands(sub: Any) -> None:
 def _add_scene_command(sub: Any) -> None:
     """``wallmap scene``: a generated building's bag and its ground truth."""
     p = add_command(
-        sub, "scene", "write a bag of a generated scene, with its ground truth", _cmd_scene
+        sub,
+        "scene",
+        "write a bag of a generated scene, with its ground truth",
+        _cmd_scene,
+        configured=False,
     )
     p.add_argument("out", type=Path, metavar="OUT", help="bag file (ROS 1) or folder (ROS 2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the floor plan and the drive")

@@ -30,7 +30,6 @@ from wallmap.common.runtime import stop_on_signals
 from wallmap.common.transport import Keys, make_config, open_session
 from wallmap.config import Config, UpSettings, to_plain, to_toml, with_odometry_poses
 from wallmap.map_client import format_table, to_json
-from wallmap.services.player.settings import PlayerSettings
 
 if TYPE_CHECKING:
     from wallmap.scene import FloorPlan, Trajectory
@@ -311,14 +310,23 @@ def sample_bag() -> Path:
     return Path(str(resources.files("wallmap") / "data" / "sample.bag"))
 
 
-def demo(out: Path) -> int:
-    """``wallmap up`` on the sample bag, on a private loopback port, with a picture."""
+def demo(out: Path, config: Config | None = None) -> int:
+    """``wallmap up`` on the sample bag, on a private loopback port, with a picture.
+
+    ``config``: the tuning (``--config``, ``--set``) the run is made with; where it runs and
+    what it writes are the demo's own.
+    """
     bag = sample_bag()
-    config = Config(
+    base = config or Config()
+    config = replace(
+        base,
         zenoh=ZenohSettings(connect=(f"tcp/127.0.0.1:{free_loopback_port()}",)),
-        player=PlayerSettings(fast=True),
-        up=UpSettings(
-            exit_when_done=True, picture=out, truth=bag.with_name(bag.name + ".truth.json")
+        player=replace(base.player, fast=True),
+        up=replace(
+            base.up,
+            exit_when_done=True,
+            picture=out,
+            truth=bag.with_name(bag.name + ".truth.json"),
         ),
     )
     return up(config, bag)

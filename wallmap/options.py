@@ -167,7 +167,7 @@ ROUTER_JOIN = Option(
     repeat=True,
     show_default=False,
 )
-ROUTER_ZENOH = (ROUTER_JOIN, *ZENOH[1:])
+ROUTER_ZENOH = (ROUTER_JOIN, ZENOH[2])  # a router serves every prefix: it has none
 
 HISTORY = (
     Option(
@@ -466,26 +466,37 @@ VIEW = (
 
 
 def add_command(
-    sub: Any, name: str, help: str, func: Callable[..., int], *groups: Iterable[Option]
+    sub: Any,
+    name: str,
+    help: str,
+    func: Callable[..., int],
+    *groups: Iterable[Option],
+    configured: bool = True,
 ) -> argparse.ArgumentParser:
     """A subcommand that reads the configuration: ``--config``, ``--set`` and its ``groups``.
 
     ``func(args, config)`` runs it with the effective configuration (``wallmap.config``).
+    ``configured=False``: a command no configuration tunes (``scene``) takes neither flag, so
+    none is accepted and ignored; it is given the defaults.
     """
     parser = sub.add_parser(name, help=help)
     options = [option for group in groups for option in group]
-    settings = parser.add_argument_group("configuration")
-    settings.add_argument(
-        "--config", type=Path, metavar="FILE", help="TOML configuration (wallmap config prints one)"
-    )
-    settings.add_argument(
-        "--set",
-        action="append",
-        dest="sets",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="set one configuration key (repeatable), e.g. --set detector.seed=3",
-    )
+    parser.set_defaults(func=func, options=options, command_parser=parser, config=None, sets=[])
+    if configured:
+        settings = parser.add_argument_group("configuration")
+        settings.add_argument(
+            "--config",
+            type=Path,
+            metavar="FILE",
+            help="TOML configuration (wallmap config prints one)",
+        )
+        settings.add_argument(
+            "--set",
+            action="append",
+            dest="sets",
+            default=[],
+            metavar="SECTION.KEY=VALUE",
+            help="set one configuration key (repeatable), e.g. --set detector.seed=3",
+        )
     add_options(parser, options)
-    parser.set_defaults(func=func, options=options, command_parser=parser)
     return parser

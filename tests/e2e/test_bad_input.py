@@ -136,6 +136,8 @@ SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
         (["scene", "/tmp/x.bag", "--keep", "--format", "ros2-mcap"], ["ROS 2 bag is a folder"]),
         (["plot", "map.png", "--size", "0"], ["--size", "whole number > 0"]),
         (["query", "--rooms", "--bbox", "0,0,1,1"], ["--rooms answers every room", "--bbox"]),
+        (["scene", "/tmp/x.bag", "--set", "a.b=1"], ["unrecognized arguments: --set"]),
+        (["router", "--prefix", "x"], ["unrecognized arguments: --prefix x"]),
         (["scene", "/tmp/x.bag", "--width", "0"], ["--width", "whole number > 0"]),
         (["scene", "/tmp/x.bag", "--frames", "-3"], ["--frames", "whole number > 0"]),
         (["doctor", SAMPLE, "--latency-frames", "0"], ["--latency-frames", "whole number > 0"]),

@@ -46,6 +46,15 @@ def test_demo_maps_the_sample_bag_and_draws_it(tmp_path):
     assert max(width, height) == 1000
 
 
+def test_demo_is_tuned_by_its_configuration_flags(tmp_path):
+    """`wallmap demo --set ...` runs with the key set (it was accepted and ignored)."""
+    out = run_wallmap("demo", "--out", str(tmp_path / "d.png"), "--set", "up.min_obs=40")
+    assert out.returncode == 0, out.stderr
+    rows = [line.split() for line in out.stdout.splitlines() if re.match(r"\s+\d+\s+-?\d", line)]
+    assert rows, out.stdout
+    assert all(int(row[-1]) >= 40 for row in rows), "only walls seen 40 times are printed"
+
+
 def test_up_writes_the_map_as_json_and_keeps_state(tmp_path):
     port = free_port()
     json_out, state = tmp_path / "map.json", tmp_path / "state.json"

@@ -3,11 +3,13 @@ same map again (offline, on the services' code)."""
 
 from __future__ import annotations
 
+import argparse
 import tomllib
 
 import numpy as np
 import pytest
 
+from wallmap.cli import ALL, build_parser
 from wallmap.common import config_file
 from wallmap.common.config_file import ConfigError
 from wallmap.common.link_settings import TransportError
@@ -83,3 +85,15 @@ def test_a_configuration_file_reproduces_the_run(scene, tmp_path) -> None:
     default = walls(map_bag(scene))
     assert from_file == direct
     assert direct != default, "the settings change the run, so the equality means something"
+
+
+def test_every_key_a_flag_sets_wallmap_config_takes_too() -> None:
+    """`wallmap config` prints the configuration "with every flag": each key some command's flag
+    sets has a flag there (ros2.pose_source and ros2.whole_clouds share the player's flags'
+    names, so only --set reaches them there)."""
+    taken = {option.key for group in ALL for option in group}
+    commands = next(
+        a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)
+    ).choices
+    keys = {o.key for p in commands.values() for o in p.get_default("options") or ()}
+    assert keys - taken == {"ros2.pose_source", "ros2.whole_clouds"}
