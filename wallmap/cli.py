@@ -13,7 +13,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
@@ -74,6 +74,7 @@ from wallmap.options import (
     UP,
     VIEW,
     ZENOH,
+    Option,
     add_command,
     given,
 )
@@ -104,6 +105,12 @@ FAILURES = (
 SERVICE = math.inf  # services wait for their router as long as it takes
 ASK_AT_LEAST = 0.5  # s a query has, whatever the wait for the router left of --timeout
 T = TypeVar("T")
+# What `up` does only with a BAG: the live robot's bridge reads its own sensor, as it comes.
+BAG_ONLY = (
+    *SPEED,
+    *(o for o in SOURCE if o.flag != "--pose-source"),
+    *(o for o in UP if o.flag == "--exit-when-done"),
+)
 WALL_FILTERS = {"--bbox": "bbox", "--since": "since", "--tentative": "tentative"}
 ALL = (
     ZENOH,
@@ -252,9 +259,11 @@ def _cmd_up(args: argparse.Namespace, config: Config) -> int:
     if config.up.ros2:
         if args.bag is not None:
             raise PlayerError(f"--ros2 maps a live robot: give it no BAG ({args.bag})")
+        _refuse_other_modes_flags(args, BAG_ONLY, "a BAG's, not --ros2's")
         return up_live(config)
     if args.bag is None:
         raise PlayerError("a BAG to play is needed (or --ros2 for a live robot)")
+    _refuse_other_modes_flags(args, ROS2_TOPICS, "--ros2's, not a BAG's")
     if config.up.odometry and config.player.source.pose_source not in (None, "tf", "none"):
         msg = (
             "--odometry estimates the poses itself; "
@@ -262,6 +271,14 @@ def _cmd_up(args: argparse.Namespace, config: Config) -> int:
         )
         raise PlayerError(msg)
     return up(config, args.bag)
+
+
+def _refuse_other_modes_flags(
+    args: argparse.Namespace, flags: Iterable[Option], whose: str
+) -> None:
+    """`up` plays a BAG or maps a live robot: a flag of the other mode would be ignored."""
+    if wrong := [o.flag for o in flags if getattr(args, o.dest, None) is not None]:
+        raise PlayerError(f"{', '.join(wrong)}: {whose} (it would be ignored)")
 
 
 def _cmd_scene(args: argparse.Namespace, _: Config) -> int:

@@ -138,6 +138,8 @@ SAMPLE = str(ROOT / "wallmap" / "data" / "sample.bag")
         (["query", "--rooms", "--bbox", "0,0,1,1"], ["--rooms answers every room", "--bbox"]),
         (["scene", "/tmp/x.bag", "--set", "a.b=1"], ["unrecognized arguments: --set"]),
         (["router", "--prefix", "x"], ["unrecognized arguments: --prefix x"]),
+        (["up", "--ros2", "--fast", "--level", "none"], ["--fast, --level: a BAG's, not --ros2's"]),
+        (["up", SAMPLE, "--namespace", "r1"], ["--namespace: --ros2's, not a BAG's"]),
         (["scene", "/tmp/x.bag", "--width", "0"], ["--width", "whole number > 0"]),
         (["scene", "/tmp/x.bag", "--frames", "-3"], ["--frames", "whole number > 0"]),
         (["doctor", SAMPLE, "--latency-frames", "0"], ["--latency-frames", "whole number > 0"]),
