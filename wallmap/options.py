@@ -107,7 +107,7 @@ def _default_text(value: Any, option: Option) -> str:
         return ""
     if isinstance(value, tuple):
         value = ",".join(map(str, value))
-    return f" (default {value})"
+    return f" (default {value})" if value != "" else " (default: none)"
 
 
 def add_options(parser: argparse.ArgumentParser | Any, options: Iterable[Option]) -> None:
@@ -300,7 +300,13 @@ ROS2 = (
 )
 
 PLAYER = (
-    Option("--wait-timeout", "player.wait_timeout", "wait for router and services (s)", positive),
+    Option(
+        "--wait-timeout",
+        "player.wait_timeout",
+        "wait for router and services (s)",
+        positive,
+        metavar="S",
+    ),
     Option(
         "--whole-clouds",
         "player.whole_clouds",
@@ -345,9 +351,19 @@ BAND = (
 DETECTOR = (
     Option("--rows", "detector.rows.mode", "row choice", choices=("band", "row")),
     Option(
-        "--row-fraction", "detector.rows.row_fraction", "row from the top, for --rows row", float
+        "--row-fraction",
+        "detector.rows.row_fraction",
+        "row from the top, for --rows row",
+        float,
+        metavar="F",
     ),
-    Option("--noise-k", "detector.ransac.noise_k", "depth noise: sigma = k * range^2", float),
+    Option(
+        "--noise-k",
+        "detector.ransac.noise_k",
+        "depth noise: sigma = k * range^2",
+        float,
+        metavar="K",
+    ),
     Option("--seed", "detector.seed", "RANSAC seed", int),
 )
 
@@ -403,7 +419,7 @@ MAPPER = (
         "the pose wanted from ros2:tf2_msgs/msg/TFMessage",
         metavar="PARENT>CHILD",
     ),
-    Option("--pose-wait", "mapper.pose_wait", "max wait for a pose (s)", positive),
+    Option("--pose-wait", "mapper.pose_wait", "max wait for a pose (s)", positive, metavar="S"),
     Option(
         "--ros2-out",
         "mapper.ros2_out",
