@@ -111,8 +111,16 @@ class Presence:
         self.queryable.undeclare()
 
 
+_STOPS: list[threading.Event] = []  # each stop_on_signals() event, set when a thread dies
+_FAILURES: list[BaseException] = []  # what killed a thread, for the command's exit status
+
+
 def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM, so services shut down and save their state."""
+    """An event set by SIGINT or SIGTERM, so services shut down and save their state.
+
+    Set too when a thread dies of an exception (``thread_failures``): a service whose worker
+    died would otherwise look alive, answer its status, and do nothing.
+    """
     stop = threading.Event()
 
     def handler(_signum: int, _frame: FrameType | None) -> None:
@@ -120,7 +128,26 @@ def stop_on_signals() -> threading.Event:
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    _STOPS.append(stop)
+    threading.excepthook = _on_thread_failure
     return stop
+
+
+def _on_thread_failure(args: threading.ExceptHookArgs) -> None:
+    """Log the dead thread's traceback, remember why, and stop the service."""
+    if args.exc_type is SystemExit:
+        return
+    name = args.thread.name if args.thread is not None else "a thread"
+    exc_info = (args.exc_type, args.exc_value, args.exc_traceback)
+    log.error("%s died; the service stops", name, exc_info=exc_info)
+    _FAILURES.append(args.exc_value or args.exc_type())
+    for stop in _STOPS:
+        stop.set()
+
+
+def thread_failures() -> list[BaseException]:
+    """The exceptions threads died of in this process (``stop_on_signals``), oldest first."""
+    return list(_FAILURES)
 
 
 def drain(channel: zenoh.handlers.Handler[T]) -> Iterator[T]:

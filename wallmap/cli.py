@@ -34,7 +34,7 @@ from wallmap.common.link_settings import DEFAULT_CONNECT, TransportError
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_records import MapReply
 from wallmap.common.map_requests import QueryError, fetch_map, fetch_rooms
-from wallmap.common.runtime import setup_logging, stop_on_signals
+from wallmap.common.runtime import setup_logging, stop_on_signals, thread_failures
 from wallmap.common.tf_buffer import TfError
 from wallmap.common.transport import (
     Keys,
@@ -645,7 +645,11 @@ def main(argv: list[str] | None = None) -> int:
     func: Callable[[argparse.Namespace, Config], int] = args.func
     try:
         config = resolve(args.config, args.sets, given(args, args.options))
-        return func(args, config)
+        status = func(args, config)
+        if failed := thread_failures():  # logged with its traceback as it happened
+            print(f"wallmap {args.command}: error: a worker died: {failed[0]!r}", file=sys.stderr)
+            return 1
+        return status
     except BrokenPipeError:  # `wallmap query | head -1`: the reader has all it wanted
         # Python would flush stdout again at exit, into the closed pipe, and complain.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

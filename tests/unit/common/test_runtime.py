@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import subprocess
+import sys
 
 import pytest
 
@@ -38,3 +40,24 @@ def test_reasons_that_quote_what_came_do_not_grow_the_log_limit_without_bound(
         stats.refuse("frame", f"field 'stamp' must be a finite number, got {value}")
     assert stats.snapshot()["refused"] == 1_000
     assert len(stats._last_logged) <= 51
+
+
+def test_a_thread_that_dies_stops_the_service_and_is_remembered() -> None:
+    """A worker dying of an exception sets the service's stop event (it would otherwise look
+    alive and do nothing) and is kept for the command's exit status. In a process of its own:
+    it sets signal handlers and the thread hook."""
+    script = (
+        "import threading\n"
+        "from wallmap.common.runtime import stop_on_signals, thread_failures\n"
+        "stop = stop_on_signals()\n"
+        "worker = threading.Thread(target=lambda: 1 / 0, name='worker')\n"
+        "worker.start(); worker.join()\n"
+        "print(stop.is_set(), [type(e).__name__ for e in thread_failures()])\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], check=False, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[0] == "True ['ZeroDivisionError']"
+    assert "worker died; the service stops" in done.stderr
+    assert "ZeroDivisionError" in done.stderr, "its traceback is logged"
