@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from wallmap.common import compiled
 from wallmap.common.free_space import FreeSpace
 from wallmap.common.map_records import WallRecord
 from wallmap.common.rooms import (
@@ -309,12 +310,17 @@ class RoomMap:
         """Each new door's id, by its centre: an old door's near it, else a new one."""
         old_ids = list(self.doors)
         old = np.array([self.doors[i] for i in old_ids]).reshape(-1, 2)
-        apart = centres[:, None] - old[None]
-        gaps = np.hypot(apart[..., 0], apart[..., 1])
-        near = np.argwhere(gaps <= DOOR_REACH)
+        # Candidates by box (compiled), not every new door against every old one.
+        new, was = compiled.room_kernels().near_pairs(
+            compiled.plain(centres, np.float64), old - DOOR_REACH, old + DOOR_REACH
+        )
+        gaps = np.hypot(*(centres[new] - old[was]).T)
+        near = gaps <= DOOR_REACH
         pairs = sorted(
             (gap, k, old_ids[m])
-            for gap, (k, m) in zip(gaps[gaps <= DOOR_REACH].tolist(), near.tolist(), strict=True)
+            for gap, k, m in zip(
+                gaps[near].tolist(), new[near].tolist(), was[near].tolist(), strict=True
+            )
         )
         ids = _greedy(pairs)
         for k in range(len(centres)):
