@@ -369,6 +369,8 @@ def openings(
     among = np.arange(len(ends.point)) if among is None else among
     targets = _nearest_ahead(ends, among, reach, cos_max)
     ahead = np.flatnonzero(np.isfinite(targets[:, 0]))
+    targets[ahead] = _to_a_corner(ends, ahead, targets[ahead], cos_max, config.joint)
+    ahead = ahead[np.hypot(*(targets[ahead] - ends.point[ahead]).T) <= reach]
     crossing = _crossing(ends.point[ahead], targets[ahead], ends.a, ends.b, ends.piece[ahead])
     kept = ahead[~crossing]
     point, target = ends.point[kept], targets[kept]
@@ -383,6 +385,36 @@ def openings(
         once.setdefault(tuple(key), k)
     walls = ends.wall[kept].tolist()
     return [Opening(walls[k], point[k], target[k]) for k in once.values()]
+
+
+def _to_a_corner(
+    ends: _Ends, starts: NDArray[np.int64], targets: Array, cos_max: float, slack: float
+) -> Array:
+    """Each span's far end moved to the end of the wall it meets, if that is nearly as near.
+
+    A span closes the gap to the next wall; where that wall's end (a corner) lies ahead within
+    the angle and at most ``slack`` farther than the nearest point of it, the span ends there
+    (and is then held to its reach as it is). The nearest point is on its face when the wall
+    the span starts from kinks where glass begins: a span so drawn cuts a sliver of seen
+    floor off the room, and the sliver's edge looked like a door to nowhere (clutter seed 500).
+    """
+    k, s = _near(targets, ends.a, ends.b, 1e-6)
+    if not len(k):
+        return targets
+    k, s = np.tile(k, 2), np.tile(s, 2)
+    corner = np.concatenate([ends.a[s[: len(s) // 2]], ends.b[s[len(s) // 2 :]]])
+    start, outward = ends.point[starts[k]], ends.outward[starts[k]]
+    step = corner - start
+    dist = np.hypot(*step.T)
+    ok = (step * outward).sum(axis=1) >= cos_max * dist  # ahead, within the angle
+    ok &= (dist <= np.hypot(*(targets[k] - start).T) + slack) & (dist > 1e-9)
+    ok &= s != ends.piece[starts[k]]
+    k, corner, dist = k[ok], corner[ok], dist[ok]
+    order = np.lexsort((dist, k))  # per span the nearest corner (the first of equals)
+    spans, first = np.unique(k[order], return_index=True)
+    moved = targets.copy()
+    moved[spans] = corner[order[first]]
+    return moved
 
 
 def passages(ends: _Ends, config: RoomsConfig, spans: Sequence[Opening] = ()) -> list[Opening]:

@@ -405,3 +405,23 @@ def test_a_divider_runs_along_its_own_line_to_a_leaning_wall() -> None:
     (door,) = layout.doors
     assert door.p0 == pytest.approx([6.05, 1.0], abs=0.05)
     assert door.p1 == pytest.approx([6.05, 2.6], abs=0.25)
+
+
+def test_a_span_ends_at_the_corner_not_on_the_face_beside_it() -> None:
+    """Clutter seed 500: the top wall kinks up where glass begins. Along the solid piece, the
+    nearest point of the wall ahead is on its face, 0.5 m below the corner: a span there cut a
+    sliver of seen floor off the room, and its edge was served as a door to nowhere. The corner
+    is as near within 20 cm: the span ends there, along the glass, and is no door."""
+    walls = [
+        Wall(0, (0.0, 0.0), (8.0, 0.0)),
+        Wall(1, (8.0, 0.0), (8.0, 4.5)),
+        Wall(2, (8.0, 4.5), (5.8, 4.0), glass=True),
+        Wall(3, (5.8, 4.0), (0.0, 4.0)),
+        Wall(4, (0.0, 4.0), (0.0, 0.0)),
+    ]
+    route = np.array([[1.0 + 0.1 * k, 2.0] for k in range(60)])
+    mapped = [w for w in walls if not w.glass]
+    layout = find_rooms(_walls(mapped), _seen(FloorPlan(walls=tuple(walls)), route))
+    (room,) = layout.rooms
+    assert not layout.doors, [(d.p0, d.p1, d.rooms) for d in layout.doors]
+    assert room.area == pytest.approx(32.55, rel=0.03)
