@@ -297,7 +297,7 @@ def _free_standing(
         return w
 
     attached = []  # short walls joined to a longer one
-    pairs = owner[np.tile(np.arange(len(a)), 2)[joins[0]]], owner[joins[1]]
+    pairs = owner[joins[0] % len(a)], owner[joins[1]]  # end k is an end of segment k mod n
     for v, w in zip(*(side.tolist() for side in pairs), strict=True):
         if short[v] and short[w]:
             parent[root(v)] = root(w)
@@ -401,8 +401,8 @@ def _to_a_corner(
     k, s = _near(targets, ends.a, ends.b, 1e-6)
     if not len(k):
         return targets
+    corner = np.concatenate([ends.a[s], ends.b[s]])  # each wall met: its two ends
     k, s = np.tile(k, 2), np.tile(s, 2)
-    corner = np.concatenate([ends.a[s[: len(s) // 2]], ends.b[s[len(s) // 2 :]]])
     start, outward = ends.point[starts[k]], ends.outward[starts[k]]
     step = corner - start
     dist = np.hypot(*step.T)

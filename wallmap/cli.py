@@ -111,7 +111,7 @@ BAG_ONLY = (
     *(o for o in SOURCE if o.flag != "--pose-source"),
     *(o for o in UP if o.flag == "--exit-when-done"),
 )
-WALL_FILTERS = {"--bbox": "bbox", "--since": "since", "--tentative": "tentative"}
+WALL_FILTERS = ("--bbox", "--since", "--tentative")  # what `query --rooms` refuses
 ALL = (
     ZENOH,
     HISTORY,
@@ -236,7 +236,7 @@ def _ask(args: argparse.Namespace, config: Config, fetch: Callable[[zenoh.Sessio
 
 def _cmd_query(args: argparse.Namespace, config: Config) -> int:
     if args.rooms:
-        if given := [f for f, v in WALL_FILTERS.items() if getattr(args, v) not in (None, False)]:
+        if given := [f for f in WALL_FILTERS if getattr(args, f[2:]) not in (None, False)]:
             msg = f"--rooms answers every room; {', '.join(given)}: walls only"
             raise ValueError(msg)
         body = _fetch_rooms(args, config)

@@ -345,7 +345,7 @@ def test_a_crossing_narrower_than_a_door_beside_glass_is_no_door() -> None:
     assert all(np.hypot(*(d.p1 - d.p0)) >= RoomsConfig().door_min for d in layout.doors)
 
 
-def _ends_of(walls: list[Wall]):
+def _free_ends_of(walls: list[Wall]):
     """The free ends of ``walls``, none of them free-standing."""
     segments, joint = _Segments.of(_walls(walls)), RoomsConfig().joint
     return _free_ends(segments, joint, _joins(segments, joint), np.zeros(len(segments.a), bool))
@@ -357,10 +357,10 @@ def test_only_a_span_going_on_along_a_wall_may_lead_into_a_glimpse() -> None:
     the wall across the room) meets that wall at 77 degrees: what is seen beyond it is the
     room's own floor before the glass, not a space beyond a door."""
     _, mapped = _corridor_with_a_closet()
-    ends = _ends_of(mapped)
+    ends = _free_ends_of(mapped)
     assert _goes_on_along(ends, Opening(0, np.array([4.0, 0.05]), np.array(CORRIDOR[1])))
     room = [Wall(0, (0.0, 0.0), (0.0, 2.0)), Wall(1, (0.7, 5.0), (8.0, 5.0))]
-    ends = _ends_of(room)
+    ends = _free_ends_of(room)
     assert not _goes_on_along(ends, Opening(0, np.array([0.0, 2.0]), np.array([0.7, 5.0])))
 
 
