@@ -1,9 +1,9 @@
 """How the compiled loops are reached: imported when first used, fed one kind of array.
 
-The loops (``line_kernels``, ``band_kernels``, ``room_kernels``) are numba functions. Importing
-numba takes 0.2 s, which every wallmap command would pay, since the configuration they all read
-imports the modules that call the loops; so those modules reach them through these functions
-instead.
+The loops (``line_kernels``, ``band_kernels``, ``room_kernels``, ``pose_kernels``) are numba
+functions. Importing numba takes 0.2 s, which every wallmap command would pay, since the
+configuration they all read imports the modules that call the loops; so those modules reach
+them through these functions instead.
 
 numba compiles a loop once per kind of array it is given: read-only (a frame decoded from the
 wire) or not, contiguous or not, each dtype. ``plain`` hands them one kind only, so the loops
@@ -46,6 +46,14 @@ def room_kernels() -> ModuleType:
     return module
 
 
+@functools.cache
+def pose_kernels() -> ModuleType:
+    """``common/pose_kernels.py``: the pose judge's association scores and pose fit."""
+    from wallmap.common import pose_kernels as module  # noqa: PLC0415 - see the module's doc
+
+    return module
+
+
 def plain(array: Any, dtype: DTypeLike) -> NDArray[Any]:
     """``array`` as the loops take it: C-contiguous, writeable, ``dtype`` (copied if need be)."""
     if (
@@ -71,13 +79,18 @@ def compile_detector() -> float:
     return time.perf_counter() - start
 
 
+def compile_mapper() -> float:
+    """Make the mapper's loops ready (the rooms', the pose judge's); the seconds it took."""
+    start = time.perf_counter()
+    room_kernels().warm_up()
+    pose_kernels().warm_up()
+    return time.perf_counter() - start
+
+
 def compile_all() -> float:
-    """Make every loop ready, the detector's and the rooms'; the seconds it took.
+    """Make every loop ready, the detector's and the mapper's; the seconds it took.
 
     Done by ``make`` after installing and when the image is built, so that no service
-    compiles at run time; the mapper loads the rooms' loops as it starts.
+    compiles at run time; the mapper loads its loops as it starts.
     """
-    start = time.perf_counter()
-    compile_detector()
-    room_kernels().warm_up()
-    return time.perf_counter() - start
+    return compile_detector() + compile_mapper()

@@ -64,38 +64,6 @@ def innovation(
     return Innovation(residual, cov, h, m2, -0.5 * (m2 + math.log(det)) - math.log(2.0 * math.pi))
 
 
-@dataclass(frozen=True)
-class Innovations:
-    """:class:`Innovation` for n walls at once, as arrays over the first axis."""
-
-    residual: Array
-    cov: Array
-    jacobian: Array
-    mahalanobis2: Array
-    log_likelihood: Array
-
-
-def innovations(
-    s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array
-) -> Innovations:
-    """:func:`innovation` for n walls (``s``, ``p``, ``anchor`` stacked), one pose.
-
-    ``z`` and ``r``: one observation for all walls, or one per wall. An observation's
-    candidates, or a frame's, are scored in one numpy pass instead of one Python call each.
-    """
-    predicted, h, hp = wall_model.linearized_many(s, anchor, pose)
-    cov = h @ p @ h.transpose(0, 2, 1) + r + hp @ pose_cov @ hp.transpose(0, 2, 1)
-    residual = z - predicted
-    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] * cov[:, 1, 0]
-    m2 = (
-        cov[:, 1, 1] * residual[:, 0] ** 2
-        - (cov[:, 0, 1] + cov[:, 1, 0]) * residual[:, 0] * residual[:, 1]
-        + cov[:, 0, 0] * residual[:, 1] ** 2
-    ) / det
-    log_likelihood = -0.5 * (m2 + np.log(det)) - math.log(2.0 * math.pi)
-    return Innovations(residual, cov, h, m2, log_likelihood)
-
-
 def update(s: Array, p: Array, innov: Innovation) -> tuple[Array, Array]:
     """EKF update in Joseph form, which keeps P symmetric and positive for tiny covariances."""
     h = innov.jacobian

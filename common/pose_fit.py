@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wallmap.common import se2, wall_model
+from wallmap.common import compiled, se2
+from wallmap.common.compiled import plain
 from wallmap.common.se2 import Array
 
 STATE = 6
@@ -95,31 +96,12 @@ def frame_pose(xi: Array, source: Array) -> tuple[Array, Array]:
     return x, jac
 
 
-def _inverse_2x2(m: Array) -> Array:
-    """Inverses of (n, 2, 2) matrices, in closed form."""
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    out = np.empty_like(m)
-    out[:, 0, 0], out[:, 1, 1] = m[:, 1, 1], m[:, 0, 0]
-    out[:, 0, 1], out[:, 1, 0] = -m[:, 0, 1], -m[:, 1, 0]
-    return out / det[:, None, None]
-
-
 def difference(a: Array, b: Array) -> Array:
     """``a - b`` for states, the angles wrapped."""
     d = a - b
     for i in ANGLES:
         d[i] = se2.wrap(float(d[i]))
     return d
-
-
-def _linearized(
-    xi: Array, source: Array, pairs: Pairs, active: Array
-) -> tuple[Array, Array, Array, Array]:
-    """At ``xi``: the pose, the residuals, their Jacobians over the active states and S^-1."""
-    x, jx = frame_pose(xi, source)
-    predicted, hw, hp = wall_model.linearized_many(pairs.s, pairs.anchor, x)
-    s_inv = _inverse_2x2(pairs.r + hw @ pairs.p @ hw.transpose(0, 2, 1))
-    return x, pairs.z - predicted, hp @ jx[:, active], s_inv
 
 
 def fit(
@@ -143,38 +125,15 @@ def fit(
             (``STEP_TOLERANCE``).
     """
     active = np.ones(STATE, dtype=bool) if active is None else active
-    index = np.flatnonzero(active)
-    info = np.linalg.inv(cov[np.ix_(index, index)])
-    xi = mean.copy()
-    converged = False
-    for _ in range(iterations if len(pairs) else 0):
-        _, residual, h, s_inv = _linearized(xi, source, pairs, active)
-        normal, gradient = _normal_equations(info, difference(mean, xi)[index], h, s_inv, residual)
-        step = np.linalg.solve(normal, gradient)
-        xi[index] += step
-        for i in ANGLES:
-            xi[i] = se2.wrap(float(xi[i]))
-        if float(np.abs(step).max()) < STEP_TOLERANCE:
-            # Gauss-Newton converges quadratically here: the next step would be about this
-            # one squared, a micrometre. The linearisation just made holds at the new mean.
-            residual = residual - h @ step
-            converged = True
-            break
-    if not converged:
-        _, residual, h, s_inv = _linearized(xi, source, pairs, active)
-        normal, _ = _normal_equations(info, difference(mean, xi)[index], h, s_inv, residual)
-    posterior = np.zeros((STATE, STATE))
-    posterior[np.ix_(index, index)] = np.linalg.inv(normal)
-    posterior = 0.5 * (posterior + posterior.T)
-    x, jx = frame_pose(xi, source)
-    m2 = np.einsum("ni,nij,nj->n", residual, s_inv, residual)
-    return Fit(xi, posterior, x, jx @ posterior @ jx.T, m2)
-
-
-def _normal_equations(
-    info: Array, to_mean: Array, h: Array, s_inv: Array, residual: Array
-) -> tuple[Array, Array]:
-    """The Gauss-Newton system ``(info + H^T S^-1 H) step = info (mean - xi) + H^T S^-1 r``."""
-    ht_s = np.einsum("nik,nij->nkj", h, s_inv)
-    normal = info + np.einsum("nkj,njl->kl", ht_s, h)
-    return normal, info @ to_mean + np.einsum("nkj,nj->k", ht_s, residual)
+    # Gauss-Newton over a dozen pairs is some fifty numpy calls an iteration: compiled, as one
+    # pass (``common.pose_kernels``; its tests hold it to the numpy it replaced).
+    xi, posterior, x, pose_cov, m2 = compiled.pose_kernels().fit(
+        plain(mean, np.float64),
+        plain(cov, np.float64),
+        plain(source, np.float64),
+        tuple(plain(a, np.float64) for a in (pairs.z, pairs.r, pairs.s, pairs.anchor, pairs.p)),
+        plain(active, np.bool_),
+        iterations,
+        STEP_TOLERANCE,
+    )
+    return Fit(xi, posterior, x, pose_cov, m2)

@@ -134,19 +134,24 @@ def band_stack(
 ) -> NDArray[np.float32]:
     """Per column, the points nearest ``STACK`` heights spread over the band: (STACK, w, 3).
 
-    A height gets the point nearest it within half the spacing of the heights, or NaN.
+    A height gets the point nearest it within half the spacing of the heights, or NaN (the
+    first row of equals). The heights are searched column by column, each column's rows side
+    by side in memory, in buffers reused over the heights: a player's largest share per frame.
     """
     low, high = band
     spacing = (high - low) / STACK
-    height = _heights(points, T_base_sensor)
+    height = np.ascontiguousarray(_heights(points, T_base_sensor).T)  # (w, rows)
     columns = np.arange(points.shape[1])
     stack = np.full((STACK, points.shape[1], 3), np.nan, dtype=np.float32)
+    cost = np.empty_like(height)
+    inside = np.empty(height.shape, dtype=bool)
     for level in range(STACK):
-        target = low + (level + 0.5) * spacing
-        cost = np.abs(height - target)
-        cost[~(cost <= 0.5 * spacing)] = np.inf  # NaN heights too
-        best = np.argmin(cost, axis=0)
-        found = np.isfinite(cost[best, columns])
+        np.subtract(height, low + (level + 0.5) * spacing, out=cost)
+        np.abs(cost, out=cost)
+        np.less_equal(cost, 0.5 * spacing, out=inside)  # False for NaN heights too
+        np.copyto(cost, np.inf, where=~inside)
+        best = np.argmin(cost, axis=1)
+        found = inside[columns, best]
         stack[level, found] = points[best[found], columns[found]]
     return stack
 

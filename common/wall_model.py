@@ -151,20 +151,6 @@ def jacobian_pose_many(s: Array, anchor: Array, pose: Array) -> Array:
     return _jacobian_pose_from(s, *_terms_many(s, anchor, pose))
 
 
-def linearized_many(s: Array, anchor: Array, pose: Array) -> tuple[Array, Array, Array]:
-    """:func:`predict` and its two Jacobians for n walls from one pose, sharing their terms.
-
-    Shapes (n, 2), (n, 2, 2) by the state, (n, 2, 3) by the pose. Association and the pose fit
-    need all three at every step.
-    """
-    terms = _terms_many(s, anchor, pose)
-    k, rho2, sd, d, a, b = terms
-    grad = -d / rho2[:, None] + 2.0 * (sd / (rho2 * rho2))[:, None] * s  # (n, 2)
-    m = k[:, None, None] * np.eye(2) + s[:, :, None] * grad[:, None, :]  # k I + s grad^T
-    by_state = rotation(float(pose[2])).T @ m
-    return np.column_stack([k * a, k * b]), by_state, _jacobian_pose_from(s, *terms)
-
-
 def _jacobian_pose_from(
     s: Array, k: Array, rho2: Array, sd: Array, d: Array, a: Array, b: Array
 ) -> Array:

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wallmap.common import ekf, pose_fit, se2, wall_model
+from wallmap.common import compiled, ekf, pose_fit, se2, wall_model
+from wallmap.common.compiled import plain
 from wallmap.common.ekf import CHI2_2DOF_999
 from wallmap.common.messages import Observations
 from wallmap.common.se2 import Array
@@ -105,8 +106,16 @@ def associate(
     """
     if not len(found.obs):
         return _no_pairs(), []
-    innov = ekf.innovations(found.s, found.p, found.anchor, found.z, found.r, pose, pose_cov)
-    score = np.where(innov.mahalanobis2 <= CHI2_2DOF_999, innov.log_likelihood, -np.inf)
+    m2, log_likelihood = compiled.pose_kernels().scores(
+        found.s,
+        found.p,
+        found.anchor,
+        found.z,
+        found.r,
+        plain(pose, np.float64),
+        plain(pose_cov, np.float64),
+    )
+    score = np.where(m2 <= CHI2_2DOF_999, log_likelihood, -np.inf)
     best: dict[int, int] = {}
     for k in np.flatnonzero(np.isfinite(score)):
         i = int(found.obs[k])

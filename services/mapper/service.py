@@ -43,16 +43,14 @@ ACK_REPEAT = 1.0  # s between two repeats of the newest run's acknowledgement...
 REPEAT_FOR = 30.0  # ...for this long after it last moved
 
 
-def _load_room_loops(log: logging.Logger) -> None:
-    """The rooms' compiled loops, loaded before the mapper says it is ready.
+def _load_loops(log: logging.Logger) -> None:
+    """The mapper's compiled loops (the rooms', the pose judge's), loaded before it says ready.
 
-    Loaded at the first rooms update instead, numba's import and cache (a few tenths of a
-    second of CPU) fell among a short recording's frames and slowed them.
+    Loaded at first use instead, numba's import and cache (a few tenths of a second of CPU)
+    fell among a short recording's frames and slowed them.
     """
-    started = time.perf_counter()
-    compiled.room_kernels().warm_up()
-    if (took := time.perf_counter() - started) > 1.0:
-        log.info("compiled the rooms' loops in %.1f s (once; cached for later starts)", took)
+    if (took := compiled.compile_mapper()) > 1.0:
+        log.info("compiled the mapper's loops in %.1f s (once; cached for later starts)", took)
 
 
 def run(
@@ -73,7 +71,7 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     core = restore(mapper, stats, log)
-    _load_room_loops(log)
+    _load_loops(log)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:

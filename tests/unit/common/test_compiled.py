@@ -2,14 +2,17 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 from test_band_kernels import MOUNT, cluttered_stack
 
-from wallmap.common import band_kernels, line_kernels, room_kernels
+from wallmap.common import band_kernels, line_kernels, pose_kernels, room_kernels
 from wallmap.common.compiled import compile_all
 from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import Frame, pack, unpack_frame
+from wallmap.offline import run_bag
+from wallmap.scene import Camera, write_scene_bag
 from wallmap.scene.floorplan import free_rays, generate_floorplan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.room_map import RoomMap
@@ -18,7 +21,7 @@ from wallmap.services.mapper.room_map import RoomMap
 def kernels() -> dict[str, object]:
     return {
         f"{module.__name__}.{name}": value
-        for module in (line_kernels, band_kernels, room_kernels)
+        for module in (line_kernels, band_kernels, room_kernels, pose_kernels)
         for name, value in vars(module).items()
         if hasattr(value, "signatures")
     }
@@ -55,6 +58,20 @@ def test_a_rooms_update_runs_the_loops_compiled_at_install() -> None:
     for at in plan.route:
         rooms.add_frame(np.array([*at, 0.0]), np.zeros(2), free_rays(plan, np.array(at)))
     assert rooms.update(records, 0.0).rooms, "the plan's rooms are found"
+    after = {name: list(k.signatures) for name, k in kernels().items()}
+    assert after == before
+
+
+def test_judged_poses_run_the_loops_compiled_at_install(tmp_path: Path) -> None:
+    """The pose judge's fit and association get the map's and the frame's arrays as they are."""
+    compile_all()
+    before = {name: list(k.signatures) for name, k in kernels().items()}
+    bag = tmp_path / "depth.bag"
+    camera = Camera(width=160, height=120)
+    write_scene_bag(bag, seed=3, n_frames=120, fmt="ros1", sensor="depth16", camera=camera)
+    judge = run_bag(bag).mapping.judge
+    assert judge is not None
+    assert judge.counts.judged > 50
     after = {name: list(k.signatures) for name, k in kernels().items()}
     assert after == before
 

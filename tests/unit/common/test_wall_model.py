@@ -120,27 +120,6 @@ def test_innovation_gates_with_the_innovation_covariance_not_the_wall_covariance
     assert paper_style > 100 * ekf.CHI2_2DOF_999  # the paper would start a duplicate wall
 
 
-def test_the_innovations_of_many_walls_are_each_wall_s_innovation():
-    rng = np.random.default_rng(9)
-    n = 12
-    s, anchor = rng.uniform(-4, 4, (n, 2)), rng.uniform(-2, 2, (n, 2))
-    a = rng.normal(0, 0.05, (n, 2, 2))
-    p = a @ a.transpose(0, 2, 1) + 1e-6 * np.eye(2)
-    pose = rng.normal(0, 1, 3)
-    pose_cov = np.diag([1e-3, 2e-3, 1e-4])
-    z_each, r_each = rng.uniform(-4, 4, (n, 2)), np.tile(np.diag([1e-3, 4e-3]), (n, 1, 1))
-    for z, r in ((z_each, r_each), (z_each[0], r_each[0])):  # one per wall, or one for all
-        many = ekf.innovations(s, p, anchor, z, r, pose, pose_cov)
-        for k in range(n):
-            zk, rk = (z[k], r[k]) if z.ndim == 2 else (z, r)
-            one = ekf.innovation(s[k], p[k], anchor[k], zk, rk, pose, pose_cov)
-            np.testing.assert_allclose(many.residual[k], one.residual, atol=1e-12)
-            np.testing.assert_allclose(many.cov[k], one.cov, rtol=1e-12)
-            np.testing.assert_allclose(many.jacobian[k], one.jacobian, rtol=1e-12, atol=1e-15)
-            assert many.mahalanobis2[k] == pytest.approx(one.mahalanobis2, rel=1e-9)
-            assert many.log_likelihood[k] == pytest.approx(one.log_likelihood, rel=1e-9, abs=1e-9)
-
-
 def test_ekf_converges_and_is_consistent():
     rng = np.random.default_rng(3)
     true_p0, true_p1 = np.array([-4.0, 3.0]), np.array([5.0, 1.0])

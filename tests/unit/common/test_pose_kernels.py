@@ -1,0 +1,121 @@
+"""The pose judge's compiled algebra, against the wall model and the numpy fit it stands for."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wallmap.common import ekf, pose_fit, pose_kernels, se2, wall_model
+
+Array = np.ndarray
+
+
+def _random_walls(rng: np.random.Generator, n: int) -> tuple[Array, Array, Array]:
+    s, anchor = rng.uniform(-4, 4, (n, 2)), rng.uniform(-2, 2, (n, 2))
+    a = rng.normal(0, 0.05, (n, 2, 2))
+    return s, anchor, a @ a.transpose(0, 2, 1) + 1e-6 * np.eye(2)
+
+
+def test_the_compiled_wall_model_is_the_wall_model() -> None:
+    """Each wall's prediction and Jacobians (tested against numeric differentiation there)."""
+    rng = np.random.default_rng(4)
+    s, anchor, _ = _random_walls(rng, 20)
+    pose = rng.normal(0, 1, 3)
+    predicted, by_state, by_pose = pose_kernels.linearized(s, anchor, pose)
+    for i in range(20):
+        np.testing.assert_allclose(predicted[i], wall_model.predict(s[i], anchor[i], pose))
+        np.testing.assert_allclose(by_state[i], wall_model.jacobian_state(s[i], anchor[i], pose))
+        np.testing.assert_allclose(by_pose[i], wall_model.jacobian_pose(s[i], anchor[i], pose))
+
+
+def test_the_scores_are_each_wall_s_innovation() -> None:
+    rng = np.random.default_rng(9)
+    n = 12
+    s, anchor, p = _random_walls(rng, n)
+    pose, pose_cov = rng.normal(0, 1, 3), np.diag([1e-3, 2e-3, 1e-4])
+    z, r = rng.uniform(-4, 4, (n, 2)), np.tile(np.diag([1e-3, 4e-3]), (n, 1, 1))
+    m2, log_likelihood = pose_kernels.scores(s, p, anchor, z, r, pose, pose_cov)
+    for k in range(n):
+        one = ekf.innovation(s[k], p[k], anchor[k], z[k], r[k], pose, pose_cov)
+        assert m2[k] == pytest.approx(one.mahalanobis2, rel=1e-9)
+        assert log_likelihood[k] == pytest.approx(one.log_likelihood, rel=1e-9, abs=1e-9)
+
+
+def test_the_compiled_frame_pose_is_the_frame_pose() -> None:
+    """``pose_fit.frame_pose``'s Jacobian is tested against numeric differentiation."""
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        xi, source = rng.normal(0, 0.3, 6), rng.normal(0, 2.0, 3)
+        x, jac = pose_kernels.frame_pose(xi, source)
+        want_x, want_jac = pose_fit.frame_pose(xi, source)
+        np.testing.assert_allclose(x, want_x, atol=1e-14)
+        np.testing.assert_allclose(jac, want_jac, atol=1e-14)
+
+
+def _numpy_fit(
+    mean: Array, cov: Array, source: Array, pairs: pose_fit.Pairs, active: Array
+) -> tuple[Array, ...]:
+    """``pose_fit.fit`` as it was in numpy, before it was compiled: the reference."""
+    index = np.flatnonzero(active)
+    info = np.linalg.inv(cov[np.ix_(index, index)])
+    xi = mean.copy()
+
+    def linearized() -> tuple[Array, Array, Array, Array, Array]:
+        x, jx = pose_fit.frame_pose(xi, source)
+        walls = list(zip(pairs.s, pairs.anchor, strict=True))
+        predicted = np.array([wall_model.predict(a, b, x) for a, b in walls]).reshape(-1, 2)
+        hw = [wall_model.jacobian_state(a, b, x) for a, b in walls]
+        hp = [wall_model.jacobian_pose(a, b, x) for a, b in walls]
+        noise = zip(pairs.r, hw, pairs.p, strict=True)
+        s_inv = np.array([np.linalg.inv(r + h @ p @ h.T) for r, h, p in noise]).reshape(-1, 2, 2)
+        h = np.array([j @ jx[:, active] for j in hp]).reshape(-1, 2, len(index))
+        residual = pairs.z - predicted
+        ht_s = np.einsum("nik,nij->nkj", h, s_inv)
+        normal = info + np.einsum("nkj,njl->kl", ht_s, h)
+        to_mean = pose_fit.difference(mean, xi)[index]
+        gradient = info @ to_mean + np.einsum("nkj,nj->k", ht_s, residual)
+        return normal, gradient, residual, h, s_inv
+
+    normal, gradient, residual, h, s_inv = linearized()
+    for _ in range(5 if len(pairs) else 0):
+        step = np.linalg.solve(normal, gradient)
+        xi[index] += step
+        for i in pose_fit.ANGLES:
+            xi[i] = se2.wrap(float(xi[i]))
+        if float(np.abs(step).max()) < pose_fit.STEP_TOLERANCE:
+            residual = residual - h @ step
+            break
+        normal, gradient, residual, h, s_inv = linearized()
+    posterior = np.zeros((6, 6))
+    posterior[np.ix_(index, index)] = np.linalg.inv(normal)
+    posterior = 0.5 * (posterior + posterior.T)
+    x, jx = pose_fit.frame_pose(xi, source)
+    m2 = np.einsum("ni,nij,nj->n", residual, s_inv, residual)
+    return xi, posterior, x, jx @ posterior @ jx.T, m2
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("held", [False, True])
+def test_the_compiled_fit_is_the_numpy_fit(seed: int, held: bool) -> None:
+    """Poses up to 20 degrees and 0.3 m off, 0-6 walls, all states fitted or the offset held."""
+    rng = np.random.default_rng(seed)
+    n = seed % 7
+    truth = rng.normal(0, 1.0, 3)
+    s, anchor, p = _random_walls(rng, n)
+    z = np.array([wall_model.predict(a, b, truth) for a, b in zip(s, anchor, strict=True)]).reshape(
+        -1, 2
+    )
+    z += rng.normal(0, 0.01, z.shape)
+    r = np.tile(np.diag([1e-4, 4e-4]), (n, 1, 1))
+    pairs = pose_fit.Pairs(z, r, s, anchor, p)
+    source = se2.compose(truth, np.array([*rng.normal(0, 0.3, 2), rng.normal(0, 0.35)]))
+    mean = np.concatenate([rng.normal(0, 0.01, 3), np.zeros(3)])
+    cov = np.diag(np.square([0.02, 0.02, 0.01, 0.3, 0.3, 0.4]))
+    active = np.array([not held] * 3 + [True] * 3)
+    fitted = pose_fit.fit(mean, cov, source, pairs, active)
+    want = _numpy_fit(mean, cov, source, pairs, active)
+    for got, expected in zip(
+        (fitted.xi, fitted.cov, fitted.pose, fitted.pose_cov), want[:4], strict=True
+    ):
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fitted.m2, want[4], rtol=1e-7, atol=1e-9)
