@@ -24,6 +24,7 @@ from typing import Any
 import zenoh
 from zenoh.ext import AdvancedPublisher
 
+from wallmap.common import compiled
 from wallmap.common.allocator import keep_large_buffers
 from wallmap.common.codec import encode
 from wallmap.common.delivery import AckWindow, declare_history_publisher
@@ -211,6 +212,19 @@ class _Outlet:
         self._progress.put(encode({**self.state, **self._playback.status(), "state": "done"}))
 
 
+def _band_loop_loading(bag: FrameSource, player: PlayerSettings) -> threading.Thread | None:
+    """The band stack's compiled loop, loading while the player connects (None: not needed).
+
+    A camera's frames go out as the band's stack (``pick_points``); numba's import takes 0.2 s,
+    which would otherwise fall on the first frame, inside the time a ``--fast`` run reports.
+    """
+    if player.whole_clouds or bag.sensor_type == LASERSCAN:
+        return None
+    loading = threading.Thread(target=compiled.load_band_stack, daemon=True)
+    loading.start()
+    return loading
+
+
 def _play_pass(
     bag: FrameSource,
     rows: RowSelection | None,
@@ -299,12 +313,15 @@ def run(
     make_config(settings)  # a bad endpoint or Zenoh file is said before the bag is read
     with open_source(recording, player.source) as bag:
         _check_and_describe(bag, recording, player, log)
+        loading = _band_loop_loading(bag, player)
         with open_session(settings, stop=stop) as session:
             acks = AckWindow(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
             _wait_for_services(session, keys, player.services, player.wait_timeout, stop)
             sensor = "scan" if bag.sensor_type == LASERSCAN else "depth"
             rows = None if player.whole_clouds or sensor == "scan" else ask_rows(session, keys)
+            if loading is not None:
+                loading.join()
             log.info(
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )

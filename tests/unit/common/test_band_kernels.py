@@ -8,6 +8,7 @@ from wallmap.common.scan_row import (
     UPRIGHT_CELL,
     UPRIGHT_SHARE,
     UPRIGHT_TOP,
+    band_stack,
     free_rays,
     upright_points,
 )
@@ -76,3 +77,52 @@ def test_free_rays_end_at_each_column_s_farthest_point() -> None:
     np.testing.assert_allclose(ends, expected)
     _, xy_k, valid, _ = band_kernels.base_positions(stack, MOUNT, UPRIGHT_CELL)
     np.testing.assert_allclose(xy_k[valid], xy[valid])
+
+
+def _numpy_band_stack(
+    points: np.ndarray, mount: np.ndarray, band: tuple[float, float]
+) -> np.ndarray:
+    """The band's stack as numpy picked it before it was compiled: six whole-array passes."""
+    low, high = band
+    spacing = (high - low) / 6
+    a, b, c, d = mount[2].astype(np.float32)
+    height = points[..., 0] * a
+    height += points[..., 1] * b
+    height += points[..., 2] * c
+    height += d
+    columns = np.arange(points.shape[1])
+    stack = np.full((6, points.shape[1], 3), np.nan, dtype=np.float32)
+    for level in range(6):
+        cost = np.abs(height - (low + (level + 0.5) * spacing))
+        cost[~(cost <= 0.5 * spacing)] = np.inf  # NaN heights too
+        best = np.argmin(cost, axis=0)
+        found = np.isfinite(cost[best, columns])
+        stack[level, found] = points[best[found], columns[found]]
+    return stack
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_band_stack_is_numpy_s_to_the_bit(seed: int) -> None:
+    """A tilted camera's rows, with holes, as a strided read-only view over a message's bytes
+    (a cloud's 16-byte points) and as a contiguous array: the same points picked as numpy's."""
+    rng = np.random.default_rng(seed)
+    rows, width = 40, 96
+    up = np.linspace(1.0, -0.4, rows)[:, None] + rng.normal(0, 0.02, (rows, width))
+    ahead = rng.uniform(0.5, 5.0, (rows, width))
+    lateral = np.linspace(-1.0, 1.0, width)[None, :] * ahead
+    points = np.stack([lateral, -up * ahead, ahead], axis=-1).astype(np.float32)
+    points[rng.random((rows, width)) < 0.1] = np.nan
+    points[0, :4] = points[1, :4]  # the same heights on two rows, elsewhere: the first is taken
+    points[0, :4, 0] += 0.5
+    message = np.zeros((rows, width, 4), dtype=np.float32)
+    message[..., :3] = points
+    view = np.ndarray(
+        (rows, width, 3), dtype=np.float32, buffer=message.tobytes(), strides=(width * 16, 16, 4)
+    )
+    assert not view.flags.writeable
+    assert not view.flags.c_contiguous
+    band = (1.3, 2.1)
+    want = _numpy_band_stack(points, MOUNT, band)
+    assert np.isfinite(want).all(axis=-1).sum() > 200
+    for given in (points, view, points.astype(">f4")):
+        np.testing.assert_array_equal(band_stack(given, MOUNT, band), want)
