@@ -14,6 +14,7 @@ the middle of a run.
 from __future__ import annotations
 
 import functools
+import threading
 import time
 from types import ModuleType
 from typing import Any
@@ -79,15 +80,19 @@ def compile_detector() -> float:
     return time.perf_counter() - start
 
 
-def load_band_stack() -> float:
-    """Make the band stack's loop ready, for a player or a live source: the seconds it took.
+def loaded_band_kernels() -> ModuleType | None:
+    """``band_kernels`` once some thread has loaded it; None before, without loading it."""
+    return band_kernels() if band_kernels.cache_info().currsize else None
 
-    Each picks the band's heights from every frame it sends; loaded before the first frame,
-    numba's import (0.2 s) is not among the frames' times.
+
+def load_band_stack_meanwhile() -> threading.Thread:
+    """Load the band stack's loop on a thread of its own (a ``--fast`` player's).
+
+    Until it is loaded, ``scan_row.band_stack`` picks the same points in numpy.
     """
-    start = time.perf_counter()
-    band_kernels().warm_up_stack()
-    return time.perf_counter() - start
+    loading = threading.Thread(target=lambda: band_kernels().warm_up_stack(), daemon=True)
+    loading.start()
+    return loading
 
 
 def compile_mapper() -> float:

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.codec import MessageError
-from wallmap.common.compiled import band_kernels, plain
+from wallmap.common.compiled import band_kernels, loaded_band_kernels, plain
 
 Array = NDArray[np.float64]
 SEARCHED_ROWS = 64  # the band is looked for on about this many image rows (up to twice)
@@ -135,15 +135,43 @@ def band_stack(
     """Per column, the points nearest ``STACK`` heights spread over the band: (STACK, w, 3).
 
     A height gets the point nearest it within half the spacing of the heights, or NaN (the
-    first row of equals). A player's largest share of a frame, in numpy six passes over every
-    searched point; compiled, one, over the rows as they lie in the message (``band_kernels``).
+    first row of equals). A player's largest share of a frame: one compiled pass over the rows
+    as they lie in the message (``band_kernels.band_stack``) where the process has loaded it
+    (a ``--fast`` player, a detector), else six numpy passes (numba's import and start cost a
+    process 0.3 s, which a player in real time need not pay). The two pick the same points,
+    to the bit.
     """
+    kernels = loaded_band_kernels()
+    if kernels is None:
+        return _band_stack_numpy(points, T_base_sensor, band)
     if points.dtype != np.float32:
         points = points.astype(np.float32)  # a big-endian cloud's rows, say: made native
     low, high = band
-    return band_kernels().band_stack(
+    return kernels.band_stack(
         points, plain(T_base_sensor, np.float64), float(low), float(high), STACK
     )
+
+
+def _band_stack_numpy(
+    points: NDArray[np.float32], T_base_sensor: Array, band: tuple[float, float]
+) -> NDArray[np.float32]:
+    """``band_stack`` in numpy: the heights searched column by column, in reused buffers."""
+    low, high = band
+    spacing = (high - low) / STACK
+    height = np.ascontiguousarray(_heights(points, T_base_sensor).T)  # (w, rows)
+    columns = np.arange(points.shape[1])
+    stack = np.full((STACK, points.shape[1], 3), np.nan, dtype=np.float32)
+    cost = np.empty_like(height)
+    inside = np.empty(height.shape, dtype=bool)
+    for level in range(STACK):
+        np.subtract(height, low + (level + 0.5) * spacing, out=cost)
+        np.abs(cost, out=cost)
+        np.less_equal(cost, 0.5 * spacing, out=inside)  # False for NaN heights too
+        np.copyto(cost, np.inf, where=~inside)
+        best = np.argmin(cost, axis=1)
+        found = inside[columns, best]
+        stack[level, found] = points[best[found], columns[found]]
+    return stack
 
 
 def upright_points(stack: NDArray[np.float32], T_base_sensor: Array) -> NDArray[np.float32]:

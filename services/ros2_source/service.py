@@ -23,7 +23,6 @@ from typing import Any
 import zenoh
 from zenoh import ext
 
-from wallmap.common import compiled
 from wallmap.common.codec import MessageError
 from wallmap.common.delivery import declare_history_publisher
 from wallmap.common.link_settings import MAX_RATE, HistorySettings, ZenohSettings
@@ -110,8 +109,6 @@ def run(
         subscriptions = _subscriptions(ros2)
         _, msgtype = ros2.sensor_topic_type()
         rows = None if ros2.whole_clouds or msgtype == LASERSCAN else ask_rows(session, keys)
-        if rows is not None:
-            compiled.load_band_stack()  # the band's stack of every frame: loaded before the first
         live = LiveFrames(
             msgtype,
             spec,

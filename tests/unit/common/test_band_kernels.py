@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from wallmap.common import band_kernels
+from wallmap.common import band_kernels, compiled, scan_row
 from wallmap.common.scan_row import (
     UPRIGHT_CELL,
     UPRIGHT_SHARE,
@@ -124,5 +124,21 @@ def test_the_band_stack_is_numpy_s_to_the_bit(seed: int) -> None:
     band = (1.3, 2.1)
     want = _numpy_band_stack(points, MOUNT, band)
     assert np.isfinite(want).all(axis=-1).sum() > 200
+    for given in (points, view):
+        got = band_kernels.band_stack(given, MOUNT, *band, 6)
+        np.testing.assert_array_equal(got, want)
     for given in (points, view, points.astype(">f4")):
-        np.testing.assert_array_equal(band_stack(given, MOUNT, band), want)
+        np.testing.assert_array_equal(scan_row._band_stack_numpy(given, MOUNT, band), want)
+
+
+def test_the_loop_loaded_meanwhile_is_the_one_picking(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(7)
+    points = cluttered_stack(rng, width=64).repeat(4, axis=0)  # 24 rows
+    compiled.load_band_stack_meanwhile().join()
+    assert compiled.loaded_band_kernels() is band_kernels
+    picked = []
+    loop = band_kernels.band_stack
+    monkeypatch.setattr(band_kernels, "band_stack", lambda *args: picked.append(1) or loop(*args))
+    stack = band_stack(points, MOUNT, (1.3, 2.1))
+    assert picked == [1]
+    np.testing.assert_array_equal(stack, scan_row._band_stack_numpy(points, MOUNT, (1.3, 2.1)))

@@ -81,3 +81,15 @@ def test_the_configuration_does_not_load_numba() -> None:
     code = "import sys, wallmap.config, wallmap.cli; print('numba' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_band_stack_is_picked_before_numba_is_loaded() -> None:
+    """A player's first frames do not wait for numba's 0.3 s: numpy picks them meanwhile."""
+    code = (
+        "import sys, numpy as np; from wallmap.common import scan_row; "
+        "points = np.random.default_rng(1).normal(0, 1, (20, 30, 3)).astype(np.float32); "
+        "stack = scan_row.band_stack(points, np.eye(4), (0.0, 1.0)); "
+        "print(stack.shape, np.isfinite(stack).any(), 'numba' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "(6, 30, 3) True False"
