@@ -253,7 +253,7 @@ def farthest_ends(xy: Array, valid: NDArray[np.bool_], ox: float, oy: float) -> 
 
 
 def warm_up_stack() -> None:
-    """Compile (or load from the cache) the players' loop, ``band_stack``, alone."""
+    """Compile (or load from the cache) a player's loop, ``band_stack``, alone."""
     band_stack(np.zeros((4, 3, 3), dtype=np.float32), np.eye(4), 1.3, 2.1, 6)
 
 
