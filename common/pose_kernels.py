@@ -8,8 +8,8 @@ pass. The equations are those of ``common.wall_model`` (the model and its Jacobi
 against numeric differentiation there), ``common.se2`` and ``common.pose_fit``, written out in
 scalars; ``tests/unit/common/test_pose_kernels.py`` checks these against the numpy they replace.
 
-No SciPy here, so numba has no LAPACK: the 6x6 systems are solved by Gauss-Jordan elimination
-with partial pivoting, as LAPACK's ``gesv`` does for such small matrices (to the last bits).
+No SciPy here, so numba has no LAPACK: the 6x6 systems are solved by Gaussian elimination with
+partial pivoting and back substitution, as LAPACK's ``gesv`` does (to the last bits).
 Compiled once per machine and cached, as ``line_kernels`` is.
 """
 
@@ -79,17 +79,8 @@ def _mv(a: Array, v: Array) -> Array:
 @njit(cache=True, nogil=True)
 def _covariance(hw: Array, p: Array, extra: Array) -> tuple[float, float, float, float]:
     """``hw p hw^T + extra`` of one pair, its four entries (row-major)."""
-    out = np.empty(4)
-    for row in range(2):
-        for col in range(2):
-            total = 0.0
-            for j in range(2):
-                inner = 0.0
-                for k in range(2):
-                    inner += hw[row, k] * p[k, j]
-                total += inner * hw[col, j]
-            out[2 * row + col] = total + extra[row, col]
-    return out[0], out[1], out[2], out[3]
+    out = _mm(_mm(hw, p), hw.T.copy()) + extra
+    return out[0, 0], out[0, 1], out[1, 0], out[1, 1]
 
 
 @njit(cache=True, nogil=True)
@@ -104,15 +95,8 @@ def scores(
     n = len(s)
     predicted, by_state, by_pose = linearized(s, anchor, pose)
     m2, log_likelihood = np.empty(n), np.empty(n)
-    from_pose = np.empty((2, 2))
     for i in range(n):
-        jq = _mm(by_pose[i], pose_cov)
-        for row in range(2):
-            for col in range(2):
-                total = 0.0
-                for k in range(3):
-                    total += jq[row, k] * by_pose[i, col, k]
-                from_pose[row, col] = total
+        from_pose = _mm(_mm(by_pose[i], pose_cov), by_pose[i].T.copy())
         c00, c01, c10, c11 = _covariance(by_state[i], p[i], r[i] + from_pose)
         e0, e1 = z[i, 0] - predicted[i, 0], z[i, 1] - predicted[i, 1]
         det = c00 * c11 - c01 * c10
@@ -123,10 +107,9 @@ def scores(
 
 @njit(cache=True, nogil=True)
 def _solve(a: Array, b: Array) -> Array:
-    """``a x = b`` for a small square ``a`` and ``b`` (m,) or (m, k): Gauss-Jordan, pivoted."""
+    """``a x = b`` for a small square ``a`` and ``b`` (m, k): elimination, pivoted."""
     m = len(a)
-    work = a.copy()
-    rhs = b.copy().reshape(m, -1)
+    work, rhs = a.copy(), b.copy()
     for col in range(m):
         pivot = col + np.argmax(np.abs(work[col:, col]))
         if pivot != col:
@@ -224,7 +207,7 @@ def fit(
     xi = mean.copy()
     normal, gradient, residual, h, s_inv = _normal_equations(xi, source, mean, info, index, pairs)
     for _ in range(iterations if len(pairs[0]) else 0):
-        step = _solve(normal, gradient)[:, 0]
+        step = _solve(normal, gradient.reshape(m, 1))[:, 0].copy()  # one kind of array each
         for k in range(m):
             xi[index[k]] += step[k]
         xi[2], xi[5] = _wrap(xi[2]), _wrap(xi[5])
