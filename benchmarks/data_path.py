@@ -26,6 +26,7 @@ from pathlib import Path
 
 import zenoh
 from end_to_end import read_floor
+from floor_ratio import write_depth_bag
 from versus import ROOT, run_once
 
 from wallmap.common.delivery import (
@@ -38,7 +39,6 @@ from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.runtime import drain
 from wallmap.common.transport import open_session
 from wallmap.launcher import free_loopback_port
-from wallmap.scene import Camera, write_scene_bag
 
 # Bytes per message and poses per frame, as `wallmap player --fast` sends a generated 784-frame
 # 320x240 16UC1 bag (counted by a subscriber to every key): the band's stack, a pose of tf,
@@ -176,15 +176,7 @@ def main() -> None:
         return
     floors, paths, pipelines = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        bag = Path(tmp) / "depth"
-        write_scene_bag(
-            bag,
-            seed=7,
-            n_frames=args.frames,
-            fmt="ros2-mcap",
-            sensor="depth16",
-            camera=Camera(width=320, height=240),
-        )
+        bag = write_depth_bag(Path(tmp) / "depth", args.frames)
         for _ in range(args.rounds):
             floors.append(read_floor(bag, "sensor_msgs/msg/Image"))
             paths.append(data_path_seconds(args.frames))

@@ -28,6 +28,19 @@ CLOUD, IMAGE, SCAN = (f"sensor_msgs/msg/{t}" for t in ("PointCloud2", "Image", "
 PROCESSES = ("player", "detector", "mapper", "odometry", "router")
 
 
+def write_depth_bag(path: Path, frames: int = 784) -> Path:
+    """The issue's ROS 2 bag: a generated scene's 320x240 16UC1 depth images, mcap, 15 Hz."""
+    write_scene_bag(
+        path,
+        seed=7,
+        n_frames=frames,
+        fmt="ros2-mcap",
+        sensor="depth16",
+        camera=Camera(width=320, height=240),
+    )
+    return path
+
+
 def bags(folder: Path, scale: float) -> dict[str, tuple[Path, str, bool]]:
     """The three bags: name -> (path, sensor message type, poses by odometry)."""
     cloud, depth, lidar = folder / "cloud.bag", folder / "depth", folder / "lidar.bag"
@@ -40,14 +53,7 @@ def bags(folder: Path, scale: float) -> dict[str, tuple[Path, str, bool]]:
         camera=Camera(width=640, height=480),
         rate_hz=30.0,
     )
-    write_scene_bag(
-        depth,
-        seed=7,
-        n_frames=round(784 * scale),
-        fmt="ros2-mcap",
-        sensor="depth16",
-        camera=Camera(width=320, height=240),
-    )
+    write_depth_bag(depth, round(784 * scale))
     write_scene_bag(
         lidar, seed=7, n_frames=round(1000 * scale), fmt="ros1", sensor="laserscan", rate_hz=15.0
     )

@@ -20,8 +20,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from floor_ratio import write_depth_bag
+
 from wallmap.offline import run_bag
-from wallmap.scene import Camera, write_scene_bag
 from wallmap.services.mapper.mapping import Mapping
 from wallmap.services.mapper.pose_judge import PoseJudge
 from wallmap.services.mapper.room_map import RoomMap
@@ -80,12 +81,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=784)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
-        bag = Path(folder) / "depth"
-        camera = Camera(width=320, height=240)
-        write_scene_bag(
-            bag, seed=7, n_frames=args.frames, fmt="ros2-mcap", sensor="depth16", camera=camera
-        )
-        per_frame = measure(bag)
+        per_frame = measure(write_depth_bag(Path(folder) / "depth", args.frames))
     frames = len(per_frame[PARTS[0][0]])
     print(f"{frames} frames of 320x240 depth16, tf poses judged\n")
     print("| part | ms / frame (median) | mean |\n|---|---:|---:|")
