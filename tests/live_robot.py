@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import struct
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -61,6 +62,8 @@ class Robot:
         self.session, self.bag, self.namespace, self.naming = session, bag, namespace, naming
         self.renamed = renamed or {}
         self.sent: dict[str, int] = {}
+        self._hold: tuple[str, int] | None = None  # (topic, count): stop once it sent so many
+        self._going_on = threading.Event()
         self._static: bytes | None = None
         self._seq = 0
         with Reader(bag) as reader:
@@ -162,10 +165,29 @@ class Robot:
                 since = (stamp - start_bag) * 1e-9
                 if quiet and connection.topic in SENSOR_TOPICS and quiet[0] <= since < quiet[1]:
                     continue
+                start_wall += self._held()
                 due = start_wall + (stamp - start_bag) * 1e-9 / SPEED
                 time.sleep(max(0.0, due - time.monotonic()))
                 self._put(connection.topic, bytes(raw))
                 self.sent[connection.topic] = self.sent.get(connection.topic, 0) + 1
+
+    def hold_after(self, topic: str, more: int) -> None:
+        """Stop sending anything once ``more`` more ``topic`` messages are out, until ``go_on``."""
+        self._going_on.clear()
+        self._hold = (topic, self.sent.get(topic, 0) + more)
+
+    def go_on(self) -> None:
+        self._hold = None
+        self._going_on.set()
+
+    def _held(self) -> float:
+        """Seconds the robot stood held here (0 if it was not): its pace resumes after them."""
+        hold = self._hold
+        if hold is None or self.sent.get(hold[0], 0) < hold[1]:
+            return 0.0
+        since = time.monotonic()
+        self._going_on.wait()
+        return time.monotonic() - since
 
     def close(self) -> None:
         for declared in self._declared:

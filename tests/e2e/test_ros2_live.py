@@ -10,6 +10,7 @@ bridge answers from its cache for a transient-local topic. A detector and a mapp
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -18,7 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import Stack, assert_clean_exit, free_port
+from conftest import Service, Stack, assert_clean_exit, free_port
 from live_robot import DOMAIN, SENSORS, Robot, client, mapped, play_to_the_source
 
 from wallmap.common.messages import unpack_frame
@@ -94,11 +95,28 @@ def _status_of(stack: Stack, service: str) -> dict:
     return next(s for s in json.loads(out.stdout) if s["service"] == service)
 
 
+def _published(source: Service) -> int:
+    """The frames a stopped `wallmap ros2` published, as its last log line counts them."""
+    found = re.search(r"stopping: .*'frames': (\d+)", source.output())
+    assert found, source.output()
+    return int(found[1])
+
+
+# The restart just after the stall (the 36th image sent is the bag's 59th). While no source runs
+# the robot goes on for 15 images (1 s of the bag), then waits for the new source: how long a
+# process takes to start on a loaded machine does not decide what is lost. Anywhere near here a
+# loss of up to 45 frames leaves every wall seen again; later in the bag, a loss of 20-30 frames
+# leaves the far side of a doorway seen too few times to be merged with its near side, and the
+# map rightly has that wall in two pieces.
+RESTART_AT, GONE_ON = 36, 15
+TF_LESS = 2  # the new source's first frames, older than any tf it holds, are dropped
+
+
 def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene_bags) -> None:
     """The camera silent for 1.5 s; then `wallmap ros2` stopped and started while the robot goes on.
 
-    What the robot sends while no source runs is lost (a bridge keeps no frames); the rest is
-    mapped as one run would map it.
+    What the robot sends while no source runs is lost (a bridge keeps no frames), and no more;
+    the rest is mapped as one run would map it.
     """
     info = scene_bags("live-depth16", seed=21, n_frames=120, fmt="ros2-mcap", sensor="depth16")
     stack.start("mapper", "mapper", *stack.zenoh_args)
@@ -113,23 +131,25 @@ def test_a_sensor_that_stalls_and_a_source_restarted_mid_run(stack: Stack, scene
         robot = Robot(session, info.path, "")
         playing = threading.Thread(target=robot.play, kwargs={"quiet": (2.0, 3.5)})
         playing.start()
-        while robot.sent.get(image, 0) < 70 and playing.is_alive():
+        while robot.sent.get(image, 0) < RESTART_AT and playing.is_alive():
             time.sleep(0.05)
-        lost_from = robot.sent.get(image, 0)  # from here until the second is up
+        robot.hold_after(image, GONE_ON)
         assert first.stop(sig=2) == 0
         second = stack.start("ros2-again", *args)
         _wait_for(stack, "ros2", not_run=first_run)  # the first's presence may linger
-        lost = robot.sent.get(image, 0) - lost_from
+        robot.go_on()
         playing.join()
         robot.close()
-    sent = robot.sent[image] - lost
+    assert second.stop() == 0
+    sent = _published(first) + _published(second)
+    lost = robot.sent[image] - sent
+    assert lost <= GONE_ON + TF_LESS, f"{lost} frames lost, {GONE_ON} sent while no source ran"
     reply = mapped(lambda: stack.query("--min-obs", "3"), sent)
     score = evaluate_map(reply["walls"], info.plan, info.seen_counts)
-    print(score.summary())
+    print(score.summary(), f"({lost} frames lost in the restart)")
     assert score.precision >= 0.98
     assert score.recall >= 0.9  # what the restart missed may be all a wall was seen in
     assert score.duplicates == 0
-    assert second.stop() == 0
 
 
 def test_frames_whose_tf_never_comes_are_dropped_and_counted(stack: Stack, scene_bags) -> None:
