@@ -217,6 +217,19 @@ def decode(payload: bytes, msgtype: str) -> Any:
     return ros2_typestore().deserialize_cdr(payload, msgtype)
 
 
+def warm_up() -> None:
+    """Load the typestore and make its serializers of what is published, with one of each.
+
+    rosbags builds a typestore at import and a type's serializer at its first message, a few
+    tenths of a second of CPU together: done here before the mapper says it is ready, as its
+    compiled loops are, instead of among a recording's first frames.
+    """
+    room = {"id": 0, "polygon": [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], "area": 0.5}
+    door = {"id": 0, "p0": [0.0, 0.0], "p1": [1.0, 0.0]}
+    room_markers({"rooms": [{**room, "centroid": [0.3, 0.3]}], "doors": [door]}, {}, 0.0)
+    path([[0.0, 0.0, 0.0, 0.0]], 0.0)
+
+
 class MarkerState:
     """Which ids RViz was last told about, so that walls gone get exactly one DELETE."""
 

@@ -26,7 +26,7 @@ from wallmap.common.map_requests import answer_map_queries
 from wallmap.common.messages import pack
 from wallmap.common.runtime import Presence, Stats, drain, setup_logging
 from wallmap.common.transport import Keys, open_session
-from wallmap.services.mapper import serving
+from wallmap.services.mapper import ros2_out, serving
 from wallmap.services.mapper.core import MapperCore
 from wallmap.services.mapper.corrected_poses import CorrectedPoses
 from wallmap.services.mapper.intake import Intake
@@ -43,14 +43,17 @@ ACK_REPEAT = 1.0  # s between two repeats of the newest run's acknowledgement...
 REPEAT_FOR = 30.0  # ...for this long after it last moved
 
 
-def _load_loops(log: logging.Logger) -> None:
-    """The mapper's compiled loops (the rooms', the pose judge's), loaded before it says ready.
+def _load_ahead(log: logging.Logger, ros2: bool) -> None:
+    """What the mapper would load at first use, loaded before it says ready.
 
-    Loaded at first use instead, numba's import and cache (a few tenths of a second of CPU)
-    fell among a short recording's frames and slowed them.
+    Its compiled loops (the rooms', the pose judge's) and, publishing to ROS 2, the typestore
+    and its serializers: loaded at first use, numba's import and cache and rosbags' typestore
+    (some tenths of a second of CPU each) fell among a recording's first frames and slowed them.
     """
     if (took := compiled.compile_mapper()) > 1.0:
         log.info("compiled the mapper's loops in %.1f s (once; cached for later starts)", took)
+    if ros2:
+        ros2_out.warm_up()
 
 
 def run(
@@ -71,7 +74,7 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     core = restore(mapper, stats, log)
-    _load_loops(log)
+    _load_ahead(log, mapper.ros2_out)
     pose_key = mapper.pose_key or keys.pose
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:

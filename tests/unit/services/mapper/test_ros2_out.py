@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wallmap.common.map_records import WallRecord
+from wallmap.common.ros2_types import ros2_typestore
 from wallmap.services.mapper import ros2_out
 
 MARKERS = "visualization_msgs/msg/MarkerArray"
@@ -92,3 +93,21 @@ def test_rooms_are_outlines_labels_and_doors_in_their_namespaces() -> None:
     assert (door.ns, door.id, door.type) == ("doors", 0, door.LINE_LIST)
     assert [(p.x, p.y) for p in door.points] == [(4.0, 1.05), (4.0, 1.95)]
     assert (gone.ns, gone.id, gone.action) == ("doors", 7, gone.DELETE)
+
+
+def test_the_warm_up_makes_every_serializer_the_published_messages_need() -> None:
+    """After it, publishing generates no code: the mapper pays that before it says ready."""
+    store = ros2_typestore()
+    store.cache.clear()  # the serializers other tests made
+    ros2_out.warm_up()
+    made = set(store.cache)
+    wall = _wall(3, (((0.0, 0.0), (1.0, 0.0)),))
+    ros2_out.markers([wall], [7], 1.0)
+    ros2_out.path([[1.0, 0.0, 0.0, 0.0]], 1.0)
+    rooms = {
+        "rooms": [{"id": 1, "polygon": [[0, 0], [2, 0], [0, 2]], "area": 2.0, "centroid": [1, 1]}],
+        "doors": [{"id": 2, "p0": [0, 0], "p1": [1, 0]}],
+    }
+    ros2_out.room_markers(rooms, {"rooms": [5]}, 1.0)
+    assert set(store.cache) == made
+    assert {MARKERS, PATH} <= made
