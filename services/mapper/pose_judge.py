@@ -26,6 +26,7 @@ The corrected pose is what the frame is mapped from, and what the trajectory sho
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -206,9 +207,17 @@ class PoseJudge:
                 return self._accept(fitted, x0, jx @ prior @ jx.T, source, frame.stamp)
             matched = matched or fitted is not None
         if not matched and self.suspect is None:
-            # No settled wall takes any observation, and the source has not jumped: the
-            # walls near are not what this frame sees (a new wall in front of an old one).
-            return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
+            # No settled wall takes any observation, and the source has not jumped: the walls
+            # near are not what this frame sees (a new wall in front of an old one), or the
+            # source went wrong by a step within its jitter. Where the walls clearly place the
+            # frame elsewhere, it was the source, as if it had jumped; else the pose is taken
+            # as given.
+            given = jx @ cov @ jx.T
+            unclear = lambda: self._unjudged(source, frame.stamp, x0, given)  # noqa: E731
+            verdict = self._recover(frame, source, wall_map, x0, near, unclear=unclear)
+            if verdict.kind == "recovered":
+                self.jumped = self.suspect = frame.stamp
+            return verdict
         return self._recover(frame, source, wall_map, x0, near)
 
     def _unjudged(self, source: SourcePose, stamp: float, x0: Array, cov: Array) -> Verdict:
@@ -347,14 +356,25 @@ class PoseJudge:
         return Verdict(_as_pose(source.pose, stamp, fitted.pose, fitted.pose_cov), "corrected")
 
     def _recover(
-        self, frame: Observations, source: SourcePose, wall_map: WallMap, x0: Array, near: int
+        self,
+        frame: Observations,
+        source: SourcePose,
+        wall_map: WallMap,
+        x0: Array,
+        near: int,
+        unclear: Callable[[], Verdict] | None = None,
     ) -> Verdict:
-        """The walls contradict the source: where do they say the frame was, if clearly?"""
+        """The walls contradict the source: where do they say the frame was, if clearly?
+
+        ``unclear``: the verdict where they do not say it clearly (else the frame is refused).
+        """
         alternative = self.alternative
         guess = None if alternative is None else se2.compose(source.pose.vector, alternative)
         cfg = self.config
         found = search_pose(frame, x0, guess, wall_map, near, cfg.min_obs, cfg.search)
         if found is None:
+            if unclear is not None:
+                return unclear()
             self.counts.refused += 1
             return Verdict(None, "refused", start_walls=False)
         pose, pose_cov = found

@@ -7,6 +7,7 @@ scene's truth.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import replace as replaced
@@ -265,3 +266,34 @@ def test_a_source_ahead_of_the_frames_by_more_or_less_is_judged_the_same() -> No
         assert np.array_equal(verdicts[0].pose.vector, verdicts[1].pose.vector)
     assert judges[0].settled
     assert judges[0].latency == pytest.approx(late, abs=0.01)
+
+
+STEP_DEG = 15.0
+
+
+def test_a_source_wrong_by_less_than_its_jitter_shows_is_placed_by_the_walls() -> None:
+    """No jump: the source's poses jitter by a degree, so a 15-degree step is not one.
+
+    The walls still say clearly where the frame was; and, the source caught wrong, a frame
+    that no settled wall can check after it starts no wall (a wall mapped from a wrong pose
+    would stay beside the true one).
+    """
+    rng = np.random.default_rng(4)
+    judge, wall_map = PoseJudge(JudgeConfig(latency=0.0)), WallMap()
+    poses = [np.array([0.2 * math.cos(k / 5), 0.3 * math.sin(k / 7), 0.1 * k]) for k in range(60)]
+    for k, pose in enumerate(poses):
+        jittered = pose + rng.normal(0.0, [0.01, 0.01, math.radians(1.0)])
+        verdict = judge.judge(_frame(k * 0.1, pose), _source(k * 0.1, jittered), wall_map, None)
+        wall_map.integrate(_frame(k * 0.1, pose), verdict.pose)
+    true = poses[-1] + np.array([0.01, 0.01, 0.1])
+    wrong = true + np.array([0.05, -0.05, math.radians(STEP_DEG)])
+    assert not copy.deepcopy(judge.jumps).add(6.0, wrong), "a step the jump test takes for jitter"
+    verdict = judge.judge(_frame(6.0, true), _source(6.0, wrong), wall_map, None)
+    assert verdict.kind == "recovered"
+    assert verdict.pose is not None
+    np.testing.assert_allclose(verdict.pose.vector[:2], true[:2], atol=0.01)
+    assert abs(se2.wrap(float(verdict.pose.vector[2] - true[2]))) < math.radians(0.3)
+    unseen = [((6.0, -1.0), (6.0, 1.0))]  # a wall beyond the room, never mapped
+    after = judge.judge(_frame(6.1, true, unseen), _source(6.1, wrong), wall_map, None)
+    assert after.kind == "unjudged"
+    assert not after.start_walls
