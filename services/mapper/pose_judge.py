@@ -26,7 +26,6 @@ The corrected pose is what the frame is mapped from, and what the trajectory sho
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -212,13 +211,12 @@ class PoseJudge:
             # source went wrong by a step within its jitter. Where the walls clearly place the
             # frame elsewhere, it was the source, as if it had jumped; else the pose is taken
             # as given.
-            given = jx @ cov @ jx.T
-            unclear = lambda: self._unjudged(source, frame.stamp, x0, given)  # noqa: E731
-            verdict = self._recover(frame, source, wall_map, x0, near, unclear=unclear)
-            if verdict.kind == "recovered":
-                self.jumped = self.suspect = frame.stamp
-            return verdict
-        return self._recover(frame, source, wall_map, x0, near)
+            recovered = self._recover(frame, source, wall_map, x0, near)
+            if recovered is None:
+                return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
+            self.jumped = self.suspect = frame.stamp
+            return recovered
+        return self._recover(frame, source, wall_map, x0, near) or self._refused()
 
     def _unjudged(self, source: SourcePose, stamp: float, x0: Array, cov: Array) -> Verdict:
         """No settled wall can check the pose: taken as given, but starting no wall for a while.
@@ -356,32 +354,25 @@ class PoseJudge:
         return Verdict(_as_pose(source.pose, stamp, fitted.pose, fitted.pose_cov), "corrected")
 
     def _recover(
-        self,
-        frame: Observations,
-        source: SourcePose,
-        wall_map: WallMap,
-        x0: Array,
-        near: int,
-        unclear: Callable[[], Verdict] | None = None,
-    ) -> Verdict:
-        """The walls contradict the source: where do they say the frame was, if clearly?
-
-        ``unclear``: the verdict where they do not say it clearly (else the frame is refused).
-        """
+        self, frame: Observations, source: SourcePose, wall_map: WallMap, x0: Array, near: int
+    ) -> Verdict | None:
+        """The walls contradict the source: where do they say the frame was? None if unclear."""
         alternative = self.alternative
         guess = None if alternative is None else se2.compose(source.pose.vector, alternative)
         cfg = self.config
         found = search_pose(frame, x0, guess, wall_map, near, cfg.min_obs, cfg.search)
         if found is None:
-            if unclear is not None:
-                return unclear()
-            self.counts.refused += 1
-            return Verdict(None, "refused", start_walls=False)
+            return None
         pose, pose_cov = found
         self._remember(frame.stamp, pose, source.pose.vector)
         self.counts.recovered += 1
         placed = _as_pose(source.pose, frame.stamp, pose, pose_cov)
         return Verdict(placed, "recovered", start_walls=False)
+
+    def _refused(self) -> Verdict:
+        """The walls contradict the source and say nothing clear: nothing of the frame is mapped."""
+        self.counts.refused += 1
+        return Verdict(None, "refused", start_walls=False)
 
     def _remember(self, stamp: float, pose: Array, source: Array) -> None:
         """A recovered frame's offset; one that holds for ``ADOPT_AFTER`` s becomes the offset."""
