@@ -2,6 +2,10 @@
 
 Every failure a person can cause (a missing bag, a bad flag, no router) ends with one line
 ``wallmap <command>: error: <why>`` and exit status 1; usage errors exit 2, as argparse does.
+
+Each service, the scenes and the drawing are imported by the command that runs them, not here:
+every process would otherwise load every other's modules (a mapper the player's bag readers),
+a tenth of a second and more of each service's start.
 """
 
 from __future__ import annotations
@@ -78,15 +82,9 @@ from wallmap.options import (
     add_command,
     given,
 )
-from wallmap.services.detector import service as detector_service
-from wallmap.services.mapper import service as mapper_service
 from wallmap.services.mapper.pose_input import make_pose_input
 from wallmap.services.mapper.state_file import StateError
-from wallmap.services.merge import service as merge_service
-from wallmap.services.odometry import service as odometry_service
-from wallmap.services.player import service as player_service
 from wallmap.services.player.errors import PlayerError
-from wallmap.services.ros2_source import service as ros2_service
 from wallmap.status import fetch_status, format_status
 from wallmap.status import to_json as status_json
 from wallmap.view import add_command as add_view_command
@@ -154,12 +152,16 @@ def _cmd_router(args: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_detector(_: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.detector import service as detector_service  # noqa: PLC0415 - see doc
+
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     detector_service.run(zenoh_settings, config.detector, stop_on_signals(), config.history)
     return 0
 
 
 def _cmd_mapper(_: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.mapper import service as mapper_service  # noqa: PLC0415 - see doc
+
     mapper = config.mapper
     make_pose_input(mapper.pose_format, mapper.pose_frames)  # a bad format fails here, in one line
     if mapper.pose_key is not None:
@@ -175,12 +177,16 @@ def _cmd_mapper(_: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_ros2(_: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.ros2_source import service as ros2_service  # noqa: PLC0415 - see doc
+
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     ros2_service.run(zenoh_settings, config.ros2, stop_on_signals(), config.history)
     return 0
 
 
 def _cmd_odometry(_: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.odometry import service as odometry_service  # noqa: PLC0415 - see doc
+
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     odometry_service.run(
         zenoh_settings,
@@ -193,12 +199,16 @@ def _cmd_odometry(_: argparse.Namespace, config: Config) -> int:
 
 
 def _cmd_merge(args: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.merge import service as merge_service  # noqa: PLC0415 - see doc
+
     zenoh_settings = replace(config.zenoh, wait_for_router=SERVICE)
     merge_service.run(zenoh_settings, args.robots, stop_on_signals())
     return 0
 
 
 def _cmd_player(args: argparse.Namespace, config: Config) -> int:
+    from wallmap.services.player import service as player_service  # noqa: PLC0415 - see doc
+
     player = config.player
     zenoh_settings = replace(config.zenoh, wait_for_router=player.wait_timeout)
     result = player_service.run(zenoh_settings, args.bag, player, stop_on_signals(), config.history)
@@ -282,9 +292,8 @@ def _refuse_other_modes_flags(
 
 
 def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
-    # The scenes and the drawing are imported by their commands: every other would pay for them.
-    from wallmap.scene import Camera, PoseFaults, write_scene_bag  # noqa: PLC0415 - see above
-    from wallmap.scene.bags import tum_path_for  # noqa: PLC0415 - see above
+    from wallmap.scene import Camera, PoseFaults, write_scene_bag  # noqa: PLC0415 - see doc
+    from wallmap.scene.bags import tum_path_for  # noqa: PLC0415 - see doc
 
     truth = args.out.with_name(f"{args.out.name}.truth.json")
     if args.keep and args.out.exists() and truth.is_file():
@@ -335,7 +344,7 @@ def _cmd_scene(args: argparse.Namespace, _: Config) -> int:
 
 def _glitch(text: str) -> object:
     """``--glitch START:DUR:DEG:M`` as a ``wallmap.scene.Glitch``, its error in one line."""
-    from wallmap.scene import Glitch  # noqa: PLC0415 - see _cmd_scene
+    from wallmap.scene import Glitch  # noqa: PLC0415 - see doc
 
     try:
         return Glitch.parse(text)
@@ -344,7 +353,7 @@ def _glitch(text: str) -> object:
 
 
 def _cmd_plot(args: argparse.Namespace, config: Config) -> int:
-    from wallmap.plot import write_picture  # noqa: PLC0415 - see _cmd_scene
+    from wallmap.plot import write_picture  # noqa: PLC0415 - see doc
 
     reply = _fetch(args, config, trajectory="true")
     rooms = _fetch_rooms(args, config)

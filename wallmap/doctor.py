@@ -16,11 +16,8 @@ from typing import Any
 from wallmap.arg_types import positive_int
 from wallmap.config import Config
 from wallmap.doctor_facts import Report
-from wallmap.doctor_inspect import inspect_bag, inspect_latency, inspect_tum
-from wallmap.doctor_text import render_text
 from wallmap.options import SOURCE
 from wallmap.options import add_command as add_options_command
-from wallmap.services.player.tum_folder import is_tum_folder
 
 
 def report_json(report: Report) -> str:
@@ -36,6 +33,11 @@ def _cmd_doctor(args: argparse.Namespace, config: Config) -> int:
     Returns:
         The exit status: 1 when the player would refuse the run.
     """
+    # Imported here, not above: every wallmap command builds this one's parser.
+    from wallmap.doctor_inspect import inspect_bag, inspect_latency, inspect_tum  # noqa: PLC0415
+    from wallmap.doctor_text import render_text  # noqa: PLC0415
+    from wallmap.services.player.tum_folder import is_tum_folder  # noqa: PLC0415
+
     source = config.player.source
     if is_tum_folder(args.bag):
         report = inspect_tum(args.bag, source)

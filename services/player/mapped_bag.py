@@ -15,8 +15,6 @@ import mmap
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-from rosbags.rosbag1 import Reader as Reader1
-from rosbags.rosbag1.reader import decompressors
 
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.ros1_records import OP_CONNECTION, OP_MSGDATA, UINT32, record_header
@@ -37,6 +35,11 @@ def mapped_messages(
     Only a single uncompressed ROS 1 bag qualifies; the caller then reads with rosbags. As with
     rosbags, ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``.
     """
+    # Imported here: the bag's reader has loaded them, and a process that reads no bag (the
+    # mapper, whose configuration names the player's settings) need not.
+    from rosbags.rosbag1 import Reader as Reader1  # noqa: PLC0415 - see above
+    from rosbags.rosbag1.reader import decompressors  # noqa: PLC0415 - see above
+
     if len(reader.readers) != 1 or not isinstance(reader.readers[0], Reader1):
         return None
     bag = reader.readers[0]

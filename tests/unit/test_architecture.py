@@ -92,6 +92,29 @@ def test_the_pure_core_loads_no_zenoh_and_no_terminal() -> None:
     assert out.stdout.strip() == "[]", out.stdout
 
 
+# What a service's process must not load: another command's modules (or the bag reader's), which
+# the command line importing every command at its top made each service pay for as it started.
+NOT_LOADED_BY = {
+    "mapper": ("rosbags.rosbag1", "wallmap.services.player.service", "wallmap.doctor_inspect"),
+    "detector": ("rosbags", "wallmap.services.mapper.service", "wallmap.view.server"),
+    "router": ("rosbags", "wallmap.services.detector.service", "wallmap.services.mapper.service"),
+}
+
+
+@pytest.mark.parametrize("command", sorted(NOT_LOADED_BY))
+def test_a_services_command_loads_its_own_modules_only(command: str) -> None:
+    """The command line and the service's own module, as ``wallmap COMMAND`` imports them."""
+    own = "" if command == "router" else f"import wallmap.services.{command}.service\n"
+    code = (
+        "import sys\nfrom wallmap.cli import build_parser\nbuild_parser()\n"
+        f"{own}print(sorted(m for m in {NOT_LOADED_BY[command]!r} if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 def _import_statements(path: Path) -> set[str]:
     """Every absolute import statement of a file, one name each (``from a import b``)."""
     lines = set()

@@ -38,8 +38,6 @@ from wallmap.common.transport import (
     open_session,
 )
 from wallmap.config import Config
-from wallmap.options import VIEW, ZENOH
-from wallmap.options import add_command as add_options_command
 from wallmap.view.live import LiveMap
 
 REQUERY_PERIOD = 2.0  # s between whole-map queries (the trajectory is not in the updates)
@@ -239,10 +237,3 @@ def run(_: argparse.Namespace, config: Config) -> int:
         httpd.shutdown()
         feed.close()
     return 0
-
-
-def add_command(sub: Any) -> None:
-    """Add ``view`` to the ``wallmap`` command's subparsers (``sub`` from add_subparsers)."""
-    add_options_command(
-        sub, "view", "a live map page on localhost (pan, zoom, hover a wall)", run, VIEW, ZENOH
-    )
