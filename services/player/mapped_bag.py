@@ -15,7 +15,6 @@ import mmap
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.ros1_records import OP_CONNECTION, OP_MSGDATA, UINT32, record_header
 
