@@ -144,6 +144,10 @@ def read_contents(
 ) -> BagContents:
     """Read what the choices about a bag need: tf, poses, the first sensor and camera messages.
 
+    Through the mapped file where it can be (``BagFile.messages``): rosbags reads every chunk
+    that holds a tf message whole, and in a camera's bag those chunks are the clouds, so the
+    first pass over a 2.9 GB bag of 640x480 clouds read all of it (2.1-2.5 s, now 0.95 s).
+
     Args:
         bag: The open bag.
         topics: The topics to consider (``--topics``); None for all of them.
@@ -157,7 +161,7 @@ def read_contents(
     contents = BagContents(bag.path, considered, bag.start_ns, bag.duration_ns, bag.message_count)
     for name, topic in sorted(considered.items()):
         if topic.msgtype in SENSOR_TYPES or topic.msgtype == CAMERA_INFO:
-            first = bag.first(topic)
+            first = bag.first(topic, mapped=True)
             contents.firsts[name] = None if first is None else first[1]
     tf_topics = {
         name: TF_TOPICS[name.lstrip("/")]
@@ -169,7 +173,7 @@ def read_contents(
     for name in sorted(pose_topics):
         contents.poses[name], contents.pose_stamps[name] = [], Stamps()
     wanted = [considered[name] for name in [*tf_topics, *sorted(pose_topics)]]
-    for name, receive_ns, msg in bag.messages(wanted):
+    for name, receive_ns, msg in bag.messages(wanted, mapped=True):
         if name in tf_topics:
             contents.add_tf(msg, static=tf_topics[name])
         else:

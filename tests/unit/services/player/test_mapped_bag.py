@@ -8,6 +8,8 @@ from rosbags.highlevel import AnyReader
 
 from wallmap.common.scan_row import RowSelection
 from wallmap.scene import Camera, write_scene_bag
+from wallmap.services.player.bag_contents import read_contents
+from wallmap.services.player.bag_file import BagFile
 from wallmap.services.player.bag_source import BagSource
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages
@@ -66,3 +68,29 @@ def test_a_damaged_message_position_is_one_readable_error(tmp_path: Path) -> Non
             index[:] = [entry._replace(offset=entry.offset + 3) for entry in index]
         with pytest.raises(PlayerError, match=r"cannot read bag .*broken\.bag"):
             list(source.frames())
+
+
+def _survey(bag: Path) -> tuple[str, ...]:
+    """What the player's first pass found: tf, the odometry and its stamps, the first cloud."""
+    with BagFile(bag) as opened:
+        contents = read_contents(opened)
+    assert contents.poses["/odom"], "the scene has odometry"
+    first = contents.firsts["/camera/depth/points"]
+    assert first is not None
+    return (
+        repr(contents.tf_links),
+        repr(contents.poses),
+        repr(contents.pose_stamps),
+        bytes(first.data).hex(),
+    )
+
+
+def test_the_survey_reads_tf_and_poses_through_the_map(tmp_path: Path) -> None:
+    """The player's first pass (tf, poses) over a plain bag reads only those messages' pages,
+    not every chunk with the clouds in it, and finds what rosbags finds in a compressed copy."""
+    plain = _bag(tmp_path, "a.bag", fmt="ros1")
+    packed = _bag(tmp_path, "b.bag", fmt="ros1", compress=True)
+    with BagFile(plain) as opened:
+        opened.reader.messages = None  # type: ignore[method-assign] # rosbags' chunk reader
+        read_contents(opened)
+    assert _survey(plain) == _survey(packed)
