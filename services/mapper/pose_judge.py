@@ -205,18 +205,19 @@ class PoseJudge:
             if fitted is not None and self._consistent(fitted, mean, prior, near):
                 return self._accept(fitted, x0, jx @ prior @ jx.T, source, frame.stamp)
             matched = matched or fitted is not None
-        if not matched and self.suspect is None:
-            # No settled wall takes any observation, and the source has not jumped: the walls
-            # near are not what this frame sees (a new wall in front of an old one), or the
-            # source went wrong by a step within its jitter. Where the walls clearly place the
-            # frame elsewhere, it was the source, as if it had jumped; else the pose is taken
-            # as given.
-            recovered = self._recover(frame, source, wall_map, x0, near)
-            if recovered is None:
-                return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
+        # The walls contradict the source, or (no settled wall takes any observation, and the
+        # source has not jumped) the walls near are not what this frame sees: a new wall in
+        # front of an old one, or the source wrong by a step within its jitter. Either way the
+        # walls are asked where the frame was.
+        trusted = not matched and self.suspect is None
+        recovered = self._recover(frame, source, wall_map, x0, near)
+        if recovered is None and trusted:  # nothing clear: the pose is taken as given
+            return self._unjudged(source, frame.stamp, x0, jx @ cov @ jx.T)
+        if recovered is None:
+            return self._refused()
+        if trusted:  # the walls place the frame elsewhere: it was the source, as if it jumped
             self.jumped = self.suspect = frame.stamp
-            return recovered
-        return self._recover(frame, source, wall_map, x0, near) or self._refused()
+        return recovered
 
     def _unjudged(self, source: SourcePose, stamp: float, x0: Array, cov: Array) -> Verdict:
         """No settled wall can check the pose: taken as given, but starting no wall for a while.
