@@ -131,6 +131,31 @@ def test_the_band_stack_is_numpy_s_to_the_bit(seed: int) -> None:
         np.testing.assert_array_equal(scan_row._band_stack_numpy(given, MOUNT, band), want)
 
 
+def test_heights_on_the_levels_edges_are_picked_as_numpy_picks_them() -> None:
+    """Heights on the edges between levels (a tie between two levels), just inside and just
+    outside them, and beyond the band: the kernel tries three levels a point, numpy all six."""
+    low, high = 1.3, 2.1
+    spacing = (high - low) / 6
+    edges = np.float32(low + spacing * np.arange(-1.0, 7.5, 0.5))
+    heights = np.concatenate(
+        [
+            edges,
+            np.nextafter(edges, np.float32(np.inf)),
+            np.nextafter(edges, np.float32(-np.inf)),
+            np.float32([0.0, 5.0, np.inf, -np.inf, np.nan]),
+        ]
+    )
+    # One point a column, the rest of it holes: no other point hides a level missed for it.
+    points = np.full((3, heights.size, 3), np.nan, dtype=np.float32)
+    points[1, :, 0] = np.linspace(0.5, 4.0, heights.size)
+    points[1, :, 1] = 0.0
+    points[1, :, 2] = heights  # the mount below reads a point's height off its z
+    level = np.eye(4)
+    want = _numpy_band_stack(points, level, (low, high))
+    assert np.isfinite(want).all(axis=-1).sum() > 30
+    np.testing.assert_array_equal(band_kernels.band_stack(points, level, low, high, 6), want)
+
+
 def test_the_loop_loaded_meanwhile_is_the_one_picking(monkeypatch: pytest.MonkeyPatch) -> None:
     rng = np.random.default_rng(7)
     points = cluttered_stack(rng, width=64).repeat(4, axis=0)  # 24 rows
