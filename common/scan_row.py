@@ -122,9 +122,10 @@ def to_base_xy(points: NDArray[np.float32], T_base_sensor: Array) -> Array:
 def _heights(points: NDArray[np.float32], T_base_sensor: Array) -> NDArray[np.float32]:
     a, b, c, d = T_base_sensor[2].astype(np.float32)
     # Per axis rather than a matrix product: the player hands a strided view over the message.
-    height = points[..., 0] * a
-    height += points[..., 1] * b
-    height += points[..., 2] * c
+    with np.errstate(invalid="ignore"):  # an infinite coordinate times 0: NaN, no height
+        height = points[..., 0] * a
+        height += points[..., 1] * b
+        height += points[..., 2] * c
     height += d
     return height
 
@@ -135,11 +136,13 @@ def band_stack(
     """Per column, the points nearest ``STACK`` heights spread over the band: (STACK, w, 3).
 
     A height gets the point nearest it within half the spacing of the heights, or NaN (the
-    first row of equals). A player's largest share of a frame: one compiled pass over the rows
-    as they lie in the message (``band_kernels.band_stack``) where the process has loaded it
-    (a ``--fast`` player, a detector), else six numpy passes (numba's import and start cost a
-    process 0.3 s, which a player in real time need not pay). The two pick the same points,
-    to the bit.
+    first row of equals). Its points are whole: a point with a coordinate that is not finite
+    has no height, and is never picked, so the stack needs no ``invalid_to_nan``.
+
+    A player's largest share of a frame: one compiled pass over the rows as they lie in the
+    message (``band_kernels.band_stack``) where the process has loaded it (a ``--fast``
+    player, a detector), else six numpy passes (numba's import and start cost a process 0.3 s,
+    which a player in real time need not pay). The two pick the same points, to the bit.
     """
     kernels = loaded_band_kernels()
     if kernels is None:

@@ -156,6 +156,24 @@ def test_heights_on_the_levels_edges_are_picked_as_numpy_picks_them() -> None:
     np.testing.assert_array_equal(band_kernels.band_stack(points, level, low, high, 6), want)
 
 
+def test_a_point_missing_a_coordinate_is_never_stacked() -> None:
+    """A cloud's point with one coordinate NaN or infinite (a driver's partial return) has no
+    height: the stack holds whole points or NaN, and the player hands it out as it is."""
+    rng = np.random.default_rng(11)
+    points = cluttered_stack(rng, width=64).repeat(4, axis=0)
+    broken = rng.random(points.shape[:2]) < 0.3
+    axis = rng.integers(0, 3, points.shape[:2])
+    points[broken, axis[broken]] = rng.choice([np.nan, np.inf, -np.inf], broken.sum())
+    assert (MOUNT[2, :3] == 0).any()  # a coordinate times a zero coefficient: NaN, no height
+    for stack in (
+        band_kernels.band_stack(points, MOUNT, 1.3, 2.1, 6),
+        scan_row._band_stack_numpy(points, MOUNT, (1.3, 2.1)),
+    ):
+        finite = np.isfinite(stack)
+        assert finite.all(axis=-1).sum() > 20
+        np.testing.assert_array_equal(finite.all(axis=-1), finite.any(axis=-1))
+
+
 def test_the_loop_loaded_meanwhile_is_the_one_picking(monkeypatch: pytest.MonkeyPatch) -> None:
     rng = np.random.default_rng(7)
     points = cluttered_stack(rng, width=64).repeat(4, axis=0)  # 24 rows
