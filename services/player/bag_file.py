@@ -19,6 +19,7 @@ from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.mapped_bag import mapped_messages
 
 if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
 
 BAG_FORMS = "a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml, or a ROS 2 .mcap file"
@@ -111,6 +112,26 @@ def _check_path(path: Path) -> None:
     raise PlayerError(f"{path} is not a ROS bag; expected {BAG_FORMS}")
 
 
+def _open_reader(path: Path) -> AnyReader:
+    """An open reader (rosbags') of ``path``, given Humble's typestore only if the bag needs it.
+
+    A ROS 1 bag carries its message definitions, as does a ROS 2 bag recorded since Iron and
+    every MCAP file: rosbags reads the messages with those. Only a ROS 2 bag recorded without
+    them needs a default typestore, and Humble's takes a tenth of a second to build, a third of
+    a player's start on a small bag. So the bag is opened without it first; one that then fails
+    (without definitions, or damaged) is opened again with it, and fails as it always did.
+    """
+    from rosbags.highlevel import AnyReader  # noqa: PLC0415 - for processes that read bags
+
+    reader = AnyReader([path])
+    try:
+        reader.open()
+    except Exception:  # whatever it was, the second opening says it again
+        reader = AnyReader([path], default_typestore=ros2_typestore())
+        reader.open()
+    return reader
+
+
 class BagFile:
     """An open bag: its topics, its time span, and its messages in bag order.
 
@@ -132,12 +153,8 @@ class BagFile:
         """
         self.path = Path(path)
         _check_path(self.path)
-        # The default typestore only serves ROS 2 bags recorded without type definitions.
-        from rosbags.highlevel import AnyReader  # noqa: PLC0415 - for processes that read bags
-
-        self.reader = AnyReader([self.path], default_typestore=ros2_typestore())
         try:
-            self.reader.open()
+            self.reader = _open_reader(self.path)
         except Exception as err:  # a damaged bag fails in many ways (even AssertionError)
             raise _unreadable(self.path, err) from err
         self.topics = {
