@@ -40,7 +40,7 @@ def band_stack(points: Stack, mount: Array, low: float, high: float, levels: int
     ``scan_row.band_stack`` explains it; heights and their distances are float32, as numpy
     computes them there, and the first row of equals is taken, as ``argmin`` does. A point is
     tried against the level its height falls in and the two beside it only: no other level is
-    within half a spacing of it, so the picks are those of trying every level, in a third of
+    within half a spacing of it, so the picks are those of trying every level, in two thirds of
     the time on a cloud's rows (most points lie outside the band, and are passed over at once).
     """
     rows, width = points.shape[0], points.shape[1]

@@ -117,8 +117,8 @@ def _open_reader(path: Path) -> AnyReader:
 
     A ROS 1 bag carries its message definitions, as does a ROS 2 bag recorded since Iron and
     every MCAP file: rosbags reads the messages with those. Only a ROS 2 bag recorded without
-    them needs a default typestore, and Humble's takes a tenth of a second to build, a third of
-    a player's start on a small bag. So the bag is opened without it first; one that then fails
+    them needs a default typestore, and Humble's takes a tenth of a second to build, a seventh
+    of a player's start. So the bag is opened without it first; one that then fails
     (without definitions, or damaged) is opened again with it, and fails as it always did.
     """
     from rosbags.highlevel import AnyReader  # noqa: PLC0415 - for processes that read bags
