@@ -156,10 +156,6 @@ class BagFrames(ClosingSource):
                     mount,
                     self.placement.band,
                 )
-                if points.base is not None or points.dtype != np.float32:  # not ours to change
-                    points = np.array(points, dtype=np.float32)
-                if stacked is None:  # a band's stack holds whole points only (``band_stack``)
-                    points = invalid_to_nan(points)
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err
             sweep = 0.0

@@ -9,6 +9,7 @@ import numpy as np
 
 from wallmap.common.messages import Frame
 from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
+from wallmap.services.player.pointcloud import invalid_to_nan
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,12 +71,25 @@ def hand_out(
     every row. Else only the rows the selection searches are read (decoding whole clouds is most
     of a player's time) and the band's stack, or one row, is picked (``pick_points``); the band
     is the selection's, or ``seen`` (what the sensor sees), or the default.
+
+    The points are float32 and the caller's own (not a view over the message), and a point
+    without all three coordinates is all NaN, so consumers test one value for "no return". A
+    band's stack is so already (``band_stack``: such a point has no height); rows are made so.
     """
     if rows is None:
-        return read(slice(None)), None
+        return _whole_points(read(slice(None))), None
     band = rows.band or seen or DEFAULT_BAND
     points = pick_points(read(rows_to_search(rows, height)), mount, band)
-    return points, (band if points.shape[0] > 1 else None)
+    if points.shape[0] > 1:
+        return points, band
+    return _whole_points(points), None
+
+
+def _whole_points(points: np.ndarray) -> np.ndarray:
+    """``points`` as float32 of the caller's own, NaN wherever a coordinate is not finite."""
+    if points.base is not None or points.dtype != np.float32:  # a view, not ours to change
+        points = np.array(points, dtype=np.float32)
+    return invalid_to_nan(points)
 
 
 class ClosingSource:

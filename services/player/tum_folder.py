@@ -240,7 +240,7 @@ class TumFolder(ClosingSource):
             frame = SensorFrame(
                 stamp,
                 OPTICAL_FRAME,
-                np.ascontiguousarray(points, dtype=np.float32),
+                points,
                 mount,
                 offset,
                 stacked,

@@ -38,7 +38,7 @@ from wallmap.services.player.depth import depth_image_to_xyz
 from wallmap.services.player.frames import SensorFrame, hand_out
 from wallmap.services.player.laserscan import laserscan_to_xyz
 from wallmap.services.player.placement import unlevelled
-from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
+from wallmap.services.player.pointcloud import pointcloud2_xyz
 from wallmap.services.player.pose_choice import follow_the_sensor
 from wallmap.services.player.pose_sources import PoseSourceSpec
 from wallmap.services.ros2_source.live_survey import LiveSurvey, survey_rows
@@ -301,9 +301,7 @@ class LiveFrames:
         mount = self._placement.place(pose, mount)[1]
         read, height = self._reader(waiting.message)
         points, band = hand_out(read, height, self.rows, mount, self._placement.band)
-        return SensorFrame(
-            waiting.stamp, waiting.frame_id, invalid_to_nan(np.array(points)), mount, band=band
-        )
+        return SensorFrame(waiting.stamp, waiting.frame_id, points, mount, band=band)
 
     def _reader(self, msg: Any) -> tuple[Callable[[slice], np.ndarray], int]:
         if self.sensor_type == POINTCLOUD2:

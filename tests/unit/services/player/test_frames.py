@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from wallmap.common.messages import pack, unpack_frame
-from wallmap.services.player.frames import SensorFrame
+from wallmap.common.scan_row import RowSelection
+from wallmap.services.player.frames import SensorFrame, hand_out
 
 
 def test_a_sensor_frame_goes_on_the_wire_with_all_it_carries() -> None:
@@ -26,3 +27,39 @@ def test_a_frame_is_not_lossless_unless_asked() -> None:
     assert not wire.lossless
     assert wire.band is None
     assert wire.sweep == 0.0
+
+
+def _message(rows: int) -> np.ndarray:
+    """A cloud's bytes as a source reads them: read-only, with a partial return in row 0."""
+    points = np.zeros((rows, 8, 3), dtype=np.float32)
+    points[..., 2] = 2.0  # 2 m ahead of a sensor looking along z
+    points[..., 1] = np.linspace(-1.5, 0.5, rows)[:, None]  # its heights, down the image
+    points[0, 3, 1] = np.nan  # y lost, x and z kept: a driver's partial return
+    points[0, 5, 0] = np.inf
+    points.flags.writeable = False
+    return points
+
+
+def test_a_row_is_handed_out_as_the_callers_own_with_partial_points_blanked() -> None:
+    """Every source (a bag, a TUM folder, a live ROS 2 topic) gets the same points from it."""
+    message = _message(1)
+    for rows in (None, RowSelection()):
+        points, band = hand_out(lambda wanted: message[wanted], 1, rows, np.eye(4), None)
+        assert band is None
+        assert points.dtype == np.float32
+        assert points.base is None  # not a view over the message
+        expected = np.array(message)
+        expected[0, [3, 5]] = np.nan
+        np.testing.assert_array_equal(points, expected)
+    assert np.isfinite(message[0, 3, [0, 2]]).all(), "the message itself is left as it was"
+
+
+def test_a_band_stack_is_handed_out_as_it_was_picked() -> None:
+    message = _message(64)
+    mount = np.array([[0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 0.6], [0, 0, 0, 1.0]])
+    points, band = hand_out(lambda wanted: message[wanted], 64, RowSelection(), mount, None)
+    assert band is not None
+    assert points.shape[0] > 1
+    finite = np.isfinite(points)
+    assert finite.all(axis=-1).any()
+    np.testing.assert_array_equal(finite.all(axis=-1), finite.any(axis=-1))
