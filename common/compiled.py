@@ -1,9 +1,9 @@
 """How the compiled loops are reached: imported when first used, fed one kind of array.
 
-The loops (``line_kernels``, ``band_kernels``, ``room_kernels``, ``pose_kernels``) are numba
-functions. Importing numba takes 0.2 s, which every wallmap command would pay, since the
-configuration they all read imports the modules that call the loops; so those modules reach
-them through these functions instead.
+The loops (``line_kernels``, ``band_kernels``, ``room_kernels``, ``pose_kernels``,
+``map_kernels``) are numba functions. Importing numba takes 0.2 s, which every wallmap command
+would pay, since the configuration they all read imports the modules that call the loops; so
+those modules reach them through these functions instead.
 
 numba compiles a loop once per kind of array it is given: read-only (a frame decoded from the
 wire) or not, contiguous or not, each dtype. ``plain`` hands them one kind only, so the loops
@@ -55,6 +55,14 @@ def pose_kernels() -> ModuleType:
     return module
 
 
+@functools.cache
+def map_kernels() -> ModuleType:
+    """``common/map_kernels.py``: the wall map's association and update."""
+    from wallmap.common import map_kernels as module  # noqa: PLC0415 - see the module's doc
+
+    return module
+
+
 def plain(array: Any, dtype: DTypeLike) -> NDArray[Any]:
     """``array`` as the loops take it: C-contiguous, writeable, ``dtype`` (copied if need be)."""
     if (
@@ -96,10 +104,11 @@ def load_band_stack_meanwhile() -> threading.Thread:
 
 
 def compile_mapper() -> float:
-    """Make the mapper's loops ready (the rooms', the pose judge's); the seconds it took."""
+    """Make the mapper's loops ready (the rooms', the pose judge's, the map's); the seconds."""
     start = time.perf_counter()
     room_kernels().warm_up()
     pose_kernels().warm_up()
+    map_kernels().warm_up()
     return time.perf_counter() - start
 
 

@@ -15,7 +15,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common import ekf, keyframes, se2, wall_model
+from wallmap.common import compiled, ekf, keyframes, se2, wall_model
+from wallmap.common.compiled import plain
 from wallmap.common.keyframes import Keyframe
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper.extent import Extent
@@ -81,7 +82,7 @@ class WallMap:
         ``start_walls``: whether an observation no wall takes starts one (id -1 where not).
         """
         pose_vec = pose.vector
-        pose_cov = pose.cov if pose.cov is not None else self.config.pose_cov
+        pose_cov = plain(pose.cov if pose.cov is not None else self.config.pose_cov, np.float64)
         depth = frame.sensor == "depth"
         ids = [
             self._integrate_one(
@@ -122,24 +123,29 @@ class WallMap:
         A ray crosses a wall's line at some distance from the sensor; it ended past the wall by
         more than ``THROUGH_MARGIN`` plus its range noise, so the wall is not there.
         """
-        rot = se2.rotation(pose[2])
-        start = pose[:2] + rot @ origin
-        stops = pose[:2] + ends @ rot.T
-        rays = stops - start
-        length = np.linalg.norm(rays, axis=1)
-        margin = THROUGH_MARGIN + THROUGH_NOISE * length**2
-        box = np.array([np.minimum(stops.min(axis=0), start), np.maximum(stops.max(axis=0), start)])
-        for wall_id in sorted(self.index.near(box)):
-            wall = self.walls[wall_id]
-            towards = rays @ wall.normal
-            with np.errstate(divide="ignore", invalid="ignore"):
-                share = (wall.normal @ (wall.foot - start)) / towards  # where along each ray
-            distance = share * length
-            crossed = (distance > THROUGH_NEAR) & (distance < length - margin)
-            if crossed.any() and wall.extent.add_through(
-                start + share[crossed, None] * rays[crossed]
-            ):
-                self.changed.add(wall.id)
+        kernels = compiled.map_kernels()
+        start, rays, length, limit, box = kernels.rays_in_map(
+            plain(origin, np.float64),
+            plain(ends, np.float64),
+            plain(pose, np.float64),
+            THROUGH_MARGIN,
+            THROUGH_NOISE,
+        )
+        walls = [self.walls[wall_id] for wall_id in sorted(self.index.near(box))]
+        if not walls:
+            return
+        which, points = kernels.crossings(
+            start,
+            rays,
+            length,
+            limit,
+            np.array([wall.normal for wall in walls]),
+            np.array([wall.foot for wall in walls]),
+            THROUGH_NEAR,
+        )
+        for k in np.unique(which):
+            if walls[k].extent.add_through(points[which == k]):
+                self.changed.add(walls[k].id)
 
     def path(self) -> list[Keyframe]:
         """The keyframes, then the newest pose used: what the map reply's trajectory is."""
@@ -179,14 +185,23 @@ class WallMap:
         depth: bool,
         start: bool,
     ) -> int:
-        best = self.match(obs, pose, pose_cov)
-        if best is None:
+        wall = self.match(obs, pose, pose_cov)
+        if wall is None:
             if not start:
                 return -1
             s, p, anchor = ekf.initial_state(obs.closest, obs.cov, pose, pose_cov)
             return self.add_wall(obs, s, p, anchor, pose, stamp, depth=depth).id
-        wall, innov = best
-        wall.set_state(*ekf.update(wall.s, wall.p, innov))
+        wall.set_state(
+            *compiled.map_kernels().update(
+                wall.s,
+                wall.p,
+                wall.anchor,
+                plain(obs.closest, np.float64),
+                plain(obs.cov, np.float64),
+                pose,
+                pose_cov,
+            )
+        )
         return self.observed(wall, obs, pose, stamp, depth=depth).id
 
     def observed(
@@ -216,24 +231,26 @@ class WallMap:
 
     def match(
         self, obs: WallObservation, pose: Array, pose_cov: Array, min_obs: int = 0
-    ) -> tuple[Wall, ekf.Innovation] | None:
+    ) -> Wall | None:
         """The most likely wall for ``obs`` seen from ``pose`` within the gate (None: no wall).
 
         Maximum likelihood over the walls near the observed segment, on the innovation
         covariance (wall, observation and pose). ``min_obs``: only walls seen that often.
         """
-        best: tuple[float, Wall, ekf.Innovation] | None = None
-        for wall in self.near_observation(obs, pose):
-            if wall.n_obs < min_obs:
-                continue
-            innov = ekf.innovation(
-                wall.s, wall.p, wall.anchor, obs.closest, obs.cov, pose, pose_cov
-            )
-            if innov.mahalanobis2 <= self.config.gate and (
-                best is None or innov.log_likelihood > best[0]
-            ):
-                best = (innov.log_likelihood, wall, innov)
-        return None if best is None else best[1:]
+        walls = [w for w in self.near_observation(obs, pose) if w.n_obs >= min_obs]
+        if not walls:
+            return None
+        best = compiled.map_kernels().most_likely(
+            np.array([w.s for w in walls]),
+            np.array([w.p for w in walls]),
+            np.array([w.anchor for w in walls]),
+            plain(obs.closest, np.float64),
+            plain(obs.cov, np.float64),
+            pose,
+            pose_cov,
+            self.config.gate,
+        )
+        return None if best < 0 else walls[best]
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""
