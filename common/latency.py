@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from wallmap.common import compiled
+from wallmap.common.compiled import plain
 from wallmap.common.se2 import Array
 
 MATCH_ANGLE = math.radians(10.0)  # consecutive frames' lines farther apart are not one line
@@ -55,13 +57,9 @@ def line_turn(before: Array, after: Array) -> float | None:
     """
     if not len(before) or not len(after):
         return None
-    a0 = np.arctan2(before[:, 1], before[:, 0])
-    a1 = np.arctan2(after[:, 1], after[:, 0])
-    d0, d1 = np.hypot(before[:, 0], before[:, 1]), np.hypot(after[:, 0], after[:, 1])
-    turn = (a1[:, None] - a0[None, :] + math.pi) % (2 * math.pi) - math.pi
-    close = (np.abs(turn) <= MATCH_ANGLE) & (np.abs(d1[:, None] - d0[None, :]) <= MATCH_OFFSET)
-    nearest = np.argmin(np.where(close, np.abs(turn), np.inf), axis=1)
-    turns = turn[np.arange(len(after)), nearest][close.any(axis=1)]
+    turns = compiled.pose_kernels().line_turns(
+        plain(before, np.float64), plain(after, np.float64), MATCH_ANGLE, MATCH_OFFSET
+    )
     return -statistics.median(turns.tolist()) if len(turns) else None
 
 

@@ -1,12 +1,15 @@
-"""The pose judge's per-frame algebra, compiled (numba): association scores and the pose fit.
+"""The pose judge's per-frame algebra, compiled (numba): association, the pose fit, the turns.
 
 ``pose_fit.fit`` (Gauss-Newton on ``x = s * D * w`` against a frame's walls) and the scores
 ``pose_search.associate`` ranks a frame's candidate walls by are the same few lines of 2x2 and
 6x6 algebra per pair; in numpy each was about fifty calls of a few microseconds on arrays of a
 dozen pairs, and together they were a third of the mapper's time per frame. Here each is one
-pass. The equations are those of ``common.wall_model`` (the model and its Jacobians, tested
-against numeric differentiation there), ``common.se2`` and ``common.pose_fit``, written out in
-scalars; ``tests/unit/common/test_pose_kernels.py`` checks these against the numpy they replace.
+pass, and so is what was left in numpy around them: picking each observation's wall from the
+scores, the fit's distance from its prior (``PoseJudge._consistent``) and the turns of a
+frame's lines that the latency is estimated from (``latency.line_turn``). The equations are
+those of ``common.wall_model`` (the model and its Jacobians, tested against numeric
+differentiation there), ``common.se2`` and ``common.pose_fit``, written out in scalars;
+``tests/unit/common/test_pose_kernels.py`` checks these against the numpy they replace.
 
 No SciPy here, so numba has no LAPACK: the 6x6 systems are solved by Gaussian elimination with
 partial pivoting and back substitution, as LAPACK's ``gesv`` does (to the last bits).
@@ -103,6 +106,70 @@ def scores(
         m2[i] = (c11 * e0**2 - (c01 + c10) * e0 * e1 + c00 * e1**2) / det
         log_likelihood[i] = -0.5 * (m2[i] + math.log(det)) - math.log(2.0 * math.pi)
     return m2, log_likelihood
+
+
+@njit(cache=True, nogil=True)
+def best_pairs(
+    s: Array,
+    p: Array,
+    anchor: Array,
+    z: Array,
+    r: Array,
+    pose: Array,
+    pose_cov: Array,
+    obs: NDArray[np.int64],
+    gate: float,
+) -> NDArray[np.intp]:
+    """Each observation's most likely candidate wall within ``gate``, by ``scores``.
+
+    ``obs``: the observation of each candidate pair (rows of ``z``). Returns the chosen
+    candidates' indices in the order of their observations; the first of equals.
+    """
+    m2, log_likelihood = scores(s, p, anchor, z, r, pose, pose_cov)
+    best = np.full(obs.max() + 1 if len(obs) else 0, -1, dtype=np.intp)
+    for k in range(len(obs)):
+        score, i = log_likelihood[k], obs[k]
+        inside = m2[k] <= gate and math.isfinite(score)
+        if inside and (best[i] < 0 or score > log_likelihood[best[i]]):
+            best[i] = k
+    return best[best >= 0].copy()
+
+
+@njit(cache=True, nogil=True)
+def line_turns(before: Array, after: Array, match_angle: float, match_offset: float) -> Array:
+    """How each line of ``after`` turned from the line of ``before`` nearest it in direction.
+
+    Lines are closest points (n, 2) in the robot frame; a pair is one line only if within
+    ``match_angle`` (rad) and ``match_offset`` (m); a line of ``after`` matching none has no
+    turn. The first of equally near lines is taken.
+    """
+    a0, d0 = np.empty(len(before)), np.empty(len(before))
+    for j in range(len(before)):
+        a0[j] = math.atan2(before[j, 1], before[j, 0])
+        d0[j] = math.hypot(before[j, 0], before[j, 1])
+    turns, m = np.empty(len(after)), 0
+    for i in range(len(after)):
+        a1 = math.atan2(after[i, 1], after[i, 0])
+        d1 = math.hypot(after[i, 0], after[i, 1])
+        nearest, size = np.nan, np.inf
+        for j in range(len(before)):
+            turn = (a1 - a0[j] + math.pi) % (2 * math.pi) - math.pi
+            if abs(turn) <= match_angle and abs(d1 - d0[j]) <= match_offset and abs(turn) < size:
+                nearest, size = turn, abs(turn)
+        if size < np.inf:
+            turns[m] = nearest
+            m += 1
+    return turns[:m].copy()
+
+
+@njit(cache=True, nogil=True)
+def mahalanobis2(cov: Array, d: Array) -> float:
+    """``d^T cov^-1 d`` for a small covariance, by elimination (``_solve``)."""
+    x = _solve(cov, d.copy().reshape(len(d), 1))
+    total = 0.0
+    for i in range(len(d)):
+        total += d[i] * x[i, 0]
+    return total
 
 
 @njit(cache=True, nogil=True)
@@ -238,5 +305,8 @@ def warm_up() -> None:
     one2, one22 = np.array([[1.0, 0.2]]), np.array([np.eye(2) * 1e-4])
     pose, cov = np.array([0.1, 0.0, 0.05]), np.eye(3) * 1e-4
     scores(one2, one22, np.zeros((1, 2)), one2, one22, pose, cov)
+    best_pairs(one2, one22, np.zeros((1, 2)), one2, one22, pose, cov, np.zeros(1, np.int64), 13.8)
+    line_turns(one2, one2, 0.2, 0.3)
+    mahalanobis2(np.eye(6), np.ones(6))
     pairs = (one2, one22, one2, np.zeros((1, 2)), one22)
     fit(np.zeros(6), np.eye(6) * 1e-4, pose, pairs, np.ones(6, dtype=np.bool_), 5, 1e-3)

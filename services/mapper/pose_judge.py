@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from wallmap.common import pose_fit, se2, wall_model
+from wallmap.common import compiled, pose_fit, se2, wall_model
+from wallmap.common.compiled import plain
 from wallmap.common.config_file import require
 from wallmap.common.ekf import CHI2_2DOF_999
 from wallmap.common.latency import LatencyEstimator
@@ -328,11 +329,11 @@ class PoseJudge:
 
         At least one, or most of them after the source jumped.
         """
-        matched = int(np.sum(fitted.m2 <= CHI2_2DOF_999))
+        matched = sum(m2 <= CHI2_2DOF_999 for m2 in fitted.m2.tolist())
         if matched < (max(1, math.ceil(0.5 * near)) if self.suspect is not None else 1):
             return False
         d = pose_fit.difference(fitted.xi, mean)
-        return float(d @ np.linalg.solve(cov, d)) <= CHI2_6DOF_999
+        return compiled.pose_kernels().mahalanobis2(plain(cov, np.float64), d) <= CHI2_6DOF_999
 
     def _accept(
         self, fitted: pose_fit.Fit, x0: Array, prior_cov: Array, source: SourcePose, stamp: float

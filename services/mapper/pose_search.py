@@ -106,7 +106,7 @@ def associate(
     """
     if not len(found.obs):
         return _no_pairs(), []
-    m2, log_likelihood = compiled.pose_kernels().scores(
+    keep = compiled.pose_kernels().best_pairs(
         found.s,
         found.p,
         found.anchor,
@@ -114,16 +114,11 @@ def associate(
         found.r,
         plain(pose, np.float64),
         plain(pose_cov, np.float64),
+        found.obs,
+        CHI2_2DOF_999,
     )
-    score = np.where(m2 <= CHI2_2DOF_999, log_likelihood, -np.inf)
-    best: dict[int, int] = {}
-    for k in np.flatnonzero(np.isfinite(score)):
-        i = int(found.obs[k])
-        if i not in best or score[k] > score[best[i]]:
-            best[i] = int(k)
-    if not best:
+    if not len(keep):
         return _no_pairs(), []
-    keep = np.array([best[i] for i in sorted(best)])
     pairs = pose_fit.Pairs(
         found.z[keep], found.r[keep], found.s[keep], found.anchor[keep], found.p[keep]
     )

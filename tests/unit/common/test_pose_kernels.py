@@ -119,3 +119,64 @@ def test_the_compiled_fit_is_the_numpy_fit(seed: int, held: bool) -> None:
     ):
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(fitted.m2, want[4], rtol=1e-7, atol=1e-9)
+
+
+def test_each_observation_gets_the_candidate_numpy_picked() -> None:
+    """The best candidate of each observation in the gate, as numpy picked it from the scores."""
+    rng = np.random.default_rng(21)
+    some_outside = False
+    for _ in range(100):
+        n = int(rng.integers(1, 10))
+        s, anchor, p = _random_walls(rng, n)
+        pose, pose_cov = rng.normal(0, 1, 3), np.diag([1e-3, 2e-3, 1e-4])
+        obs = np.sort(rng.integers(0, 4, n))
+        predicted, _, _ = pose_kernels.linearized(s, anchor, pose)
+        z, r = predicted + rng.normal(0, 0.08, (n, 2)), np.tile(np.diag([1e-3, 4e-3]), (n, 1, 1))
+        m2, log_likelihood = pose_kernels.scores(s, p, anchor, z, r, pose, pose_cov)
+        score = np.where(m2 <= ekf.CHI2_2DOF_999, log_likelihood, -np.inf)
+        best: dict[int, int] = {}
+        for k in np.flatnonzero(np.isfinite(score)):
+            if obs[k] not in best or score[k] > score[best[obs[k]]]:
+                best[obs[k]] = int(k)
+        want = [best[i] for i in sorted(best)]
+        got = pose_kernels.best_pairs(s, p, anchor, z, r, pose, pose_cov, obs, ekf.CHI2_2DOF_999)
+        assert got.tolist() == want
+        some_outside |= len(set(obs[want].tolist())) < len(set(obs.tolist()))
+    assert some_outside  # observations with no candidate in the gate were among them
+
+
+def _numpy_line_turns(before: Array, after: Array, angle: float, offset: float) -> Array:
+    """``latency.line_turn``'s matching as it was in numpy, before it was compiled."""
+    a0, a1 = np.arctan2(before[:, 1], before[:, 0]), np.arctan2(after[:, 1], after[:, 0])
+    d0, d1 = np.hypot(before[:, 0], before[:, 1]), np.hypot(after[:, 0], after[:, 1])
+    turn = (a1[:, None] - a0[None, :] + np.pi) % (2 * np.pi) - np.pi
+    close = (np.abs(turn) <= angle) & (np.abs(d1[:, None] - d0[None, :]) <= offset)
+    nearest = np.argmin(np.where(close, np.abs(turn), np.inf), axis=1)
+    return turn[np.arange(len(after)), nearest][close.any(axis=1)]
+
+
+def test_the_lines_turn_as_numpy_matched_them() -> None:
+    """Frames of a few lines turned a little, with lines that match none and equal matches."""
+    rng = np.random.default_rng(13)
+    matched = 0
+    for _ in range(200):
+        before = rng.uniform(-4, 4, (int(rng.integers(1, 6)), 2))
+        c, q = np.cos(0.05), np.sin(0.05)
+        after = before[rng.permutation(len(before))] @ np.array([[c, q], [-q, c]])
+        after = np.vstack([after + rng.normal(0, 0.02, after.shape), rng.uniform(-4, 4, (2, 2))])
+        want = _numpy_line_turns(before, after, np.radians(10.0), 0.3)
+        got = pose_kernels.line_turns(before, after, np.radians(10.0), 0.3)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+        matched += len(want)
+    assert matched > 300
+    twin = np.array([[1.0, 1.0], [1.0, 1.0]])  # two equal lines: the first is taken
+    assert pose_kernels.line_turns(twin, np.array([[1.0, 1.0]]), 0.2, 0.3).tolist() == [0.0]
+
+
+def test_the_distance_from_the_prior_is_numpy_s() -> None:
+    rng = np.random.default_rng(17)
+    for _ in range(50):
+        a = rng.normal(0, 1, (6, 6))
+        cov, d = a @ a.T + 0.1 * np.eye(6), rng.normal(0, 1, 6)
+        want = float(d @ np.linalg.solve(cov, d))
+        assert pose_kernels.mahalanobis2(cov, d) == pytest.approx(want, rel=1e-12)
