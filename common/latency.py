@@ -171,14 +171,14 @@ class LatencyEstimator:
         if len(t0) < 10:
             return None
         grid, smooth = _smoothed(stamps, yaw)
-        shifted = self.grid[:, None]
-        source = np.interp(t1 + shifted, grid, smooth) - np.interp(t0 + shifted, grid, smooth)
-        r = np.abs(source - seen)
-        # How well the lines see a turn, from the residuals where they fit best (their MAD).
-        spread = 1.4826 * np.median(r, axis=1).min()
-        r = r / max(spread, TURN_FLOOR)
-        cost = 0.5 * np.minimum(r, OUTLIER) ** 2  # an outlier costs the same at any latency
-        cost = cost.sum(axis=1)
+        # At each latency, the source's turns against the lines', their residuals scaled by how
+        # well the lines see a turn (the MAD where they fit best); an outlier costs the same
+        # at any latency.
+        cost = compiled.pose_kernels().turn_costs(
+            *(plain(a, np.float64) for a in (t0, t1, seen, self.grid, grid, smooth)),
+            TURN_FLOOR,
+            OUTLIER,
+        )
         best = int(np.argmin(cost))
         if best in (0, len(self.grid) - 1):
             return None  # at the edge of what is looked for: not found

@@ -5,10 +5,11 @@
 6x6 algebra per pair; in numpy each was about fifty calls of a few microseconds on arrays of a
 dozen pairs, and together they were a third of the mapper's time per frame. Here each is one
 pass, and so is what was left in numpy around them: picking each observation's wall from the
-scores, the fit's distance from its prior (``PoseJudge._consistent``) and the turns of a
-frame's lines that the latency is estimated from (``latency.line_turn``). The equations are
-those of ``common.wall_model`` (the model and its Jacobians, tested against numeric
-differentiation there), ``common.se2`` and ``common.pose_fit``, written out in scalars;
+scores, the fit's distance from its prior (``PoseJudge._consistent``), the turns of a frame's
+lines that the latency is estimated from and the cost of each latency tried
+(``latency.line_turn``, ``LatencyEstimator.estimate``). The equations are those of
+``common.wall_model`` (the model and its Jacobians, tested against numeric differentiation
+there), ``common.se2`` and ``common.pose_fit``, written out in scalars;
 ``tests/unit/common/test_pose_kernels.py`` checks these against the numpy they replace.
 
 No SciPy here, so numba has no LAPACK: the 6x6 systems are solved by Gaussian elimination with
@@ -163,6 +164,62 @@ def line_turns(before: Array, after: Array, match_angle: float, match_offset: fl
 
 
 @njit(cache=True, nogil=True)
+def _interp(x: float, xp: Array, fp: Array, step: float) -> float:
+    """``np.interp(x, xp, fp)``, its formula to the bit, for ``xp`` evenly spaced by ``step``.
+
+    The interval is guessed from the spacing and then checked against ``xp``, not searched for.
+    """
+    if not x >= xp[0]:  # before the first (or NaN, which interp also leaves at the edge)
+        return fp[0] if x < xp[0] else np.nan
+    if x >= xp[-1]:
+        return fp[-1]
+    j = min(int((x - xp[0]) / step), len(xp) - 2) if step > 0.0 else 0
+    while xp[j] > x:
+        j -= 1
+    while xp[j + 1] <= x:
+        j += 1
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    return slope * (x - xp[j]) + fp[j]
+
+
+@njit(cache=True, nogil=True)
+def turn_costs(
+    t0: Array,
+    t1: Array,
+    seen: Array,
+    shifts: Array,
+    xp: Array,
+    fp: Array,
+    floor: float,
+    outlier: float,
+) -> Array:
+    """``LatencyEstimator.estimate``'s robust cost of each latency in ``shifts``.
+
+    The source's turn from ``t0`` to ``t1`` (its heading ``fp`` at stamps ``xp``, evenly
+    spaced), shifted by the latency, against the turns ``seen``: residuals scaled by their
+    spread (1.4826 times the smallest median, at least ``floor``), each costing half its
+    square up to ``outlier``.
+    """
+    n, k = len(shifts), len(seen)
+    step = xp[1] - xp[0]
+    r = np.empty((n, k))
+    spread = np.inf
+    for i in range(n):
+        for j in range(k):
+            later = _interp(t1[j] + shifts[i], xp, fp, step)
+            turned = later - _interp(t0[j] + shifts[i], xp, fp, step)
+            r[i, j] = abs(turned - seen[j])
+        spread = min(spread, np.median(r[i]))
+    scale = max(1.4826 * spread, floor)
+    cost = np.zeros(n)
+    for i in range(n):
+        for j in range(k):
+            capped = min(r[i, j] / scale, outlier)
+            cost[i] += 0.5 * capped**2
+    return cost
+
+
+@njit(cache=True, nogil=True)
 def mahalanobis2(cov: Array, d: Array) -> float:
     """``d^T cov^-1 d`` for a small covariance, by elimination (``_solve``)."""
     x = _solve(cov, d.copy().reshape(len(d), 1))
@@ -308,5 +365,7 @@ def warm_up() -> None:
     best_pairs(one2, one22, np.zeros((1, 2)), one2, one22, pose, cov, np.zeros(1, np.int64), 13.8)
     line_turns(one2, one2, 0.2, 0.3)
     mahalanobis2(np.eye(6), np.ones(6))
+    line = np.linspace(0.0, 1.0, 5)
+    turn_costs(line[:2], line[1:3], line[:2], line[:3] - 0.5, line, line, 1e-3, 3.0)
     pairs = (one2, one22, one2, np.zeros((1, 2)), one22)
     fit(np.zeros(6), np.eye(6) * 1e-4, pose, pairs, np.ones(6, dtype=np.bool_), 5, 1e-3)

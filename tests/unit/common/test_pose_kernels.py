@@ -180,3 +180,41 @@ def test_the_distance_from_the_prior_is_numpy_s() -> None:
         cov, d = a @ a.T + 0.1 * np.eye(6), rng.normal(0, 1, 6)
         want = float(d @ np.linalg.solve(cov, d))
         assert pose_kernels.mahalanobis2(cov, d) == pytest.approx(want, rel=1e-12)
+
+
+def test_interpolation_on_an_even_grid_is_numpy_s_to_the_bit() -> None:
+    """Inside, on the grid's points, at and past both ends."""
+    grid = np.arange(10.0, 25.0, 0.01)
+    values = np.cumsum(np.random.default_rng(2).normal(0, 0.01, len(grid)))
+    xs = np.concatenate([np.random.default_rng(3).uniform(9.0, 26.0, 2000), grid, [grid[-1]]])
+    want = np.interp(xs, grid, values)
+    got = [pose_kernels._interp(x, grid, values, grid[1] - grid[0]) for x in xs]
+    assert np.array_equal(got, want)
+
+
+def _numpy_turn_costs(
+    t0: Array, t1: Array, seen: Array, shifts: Array, grid: Array, smooth: Array
+) -> Array:
+    """``LatencyEstimator.estimate``'s cost as it was in numpy, before it was compiled."""
+    shifted = shifts[:, None]
+    source = np.interp(t1 + shifted, grid, smooth) - np.interp(t0 + shifted, grid, smooth)
+    r = np.abs(source - seen)
+    r = r / max(1.4826 * np.median(r, axis=1).min(), 3e-4)
+    return (0.5 * np.minimum(r, 3.0) ** 2).sum(axis=1)
+
+
+def test_the_latency_costs_are_numpy_s() -> None:
+    """Turns of a source 40 ms late, with outliers: the same costs, the same best latency."""
+    rng = np.random.default_rng(6)
+    grid = np.arange(0.0, 30.0, 0.01)
+    heading = np.cumsum(rng.normal(0, 0.004, len(grid)))
+    t0 = np.sort(rng.uniform(1.0, 28.0, 300))
+    t1 = t0 + 0.25
+    seen = np.interp(t1 + 0.04, grid, heading) - np.interp(t0 + 0.04, grid, heading)
+    seen = seen + rng.normal(0, 0.002, 300)
+    seen[::17] += 0.3  # mismatched lines
+    shifts = np.arange(-0.25, 0.2525, 0.005)
+    got = pose_kernels.turn_costs(t0, t1, seen, shifts, grid, heading, 3e-4, 3.0)
+    want = _numpy_turn_costs(t0, t1, seen, shifts, grid, heading)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    assert shifts[np.argmin(got)] == pytest.approx(0.04)
