@@ -358,10 +358,12 @@ def fit(
 
 
 def warm_up() -> None:
-    """Compile (or load from the cache) every kernel now, not on the first frame."""
+    """Compile (or load from the cache) every kernel a frame calls now, not on the first frame.
+
+    ``scores`` is not among them: frames reach it through ``best_pairs``, loaded with it.
+    """
     one2, one22 = np.array([[1.0, 0.2]]), np.array([np.eye(2) * 1e-4])
     pose, cov = np.array([0.1, 0.0, 0.05]), np.eye(3) * 1e-4
-    scores(one2, one22, np.zeros((1, 2)), one2, one22, pose, cov)
     best_pairs(one2, one22, np.zeros((1, 2)), one2, one22, pose, cov, np.zeros(1, np.int64), 13.8)
     line_turns(one2, one2, 0.2, 0.3)
     mahalanobis2(np.eye(6), np.ones(6))

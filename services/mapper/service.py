@@ -46,9 +46,11 @@ REPEAT_FOR = 30.0  # ...for this long after it last moved
 def _load_ahead(log: logging.Logger, ros2: bool) -> None:
     """What the mapper would load at first use, loaded before it says ready.
 
-    Its compiled loops (the rooms', the pose judge's) and, publishing to ROS 2, the typestore
-    and its serializers: loaded at first use, numba's import and cache and rosbags' typestore
-    (some tenths of a second of CPU each) fell among a recording's first frames and slowed them.
+    Its frame path's compiled loops (the pose judge's, the map's) and, publishing to ROS 2,
+    the typestore and its serializers: loaded at first use, numba's import and cache and
+    rosbags' typestore (some tenths of a second of CPU each) fell among a recording's first
+    frames and slowed them. The rooms' loops load with the rooms' first segmentation, off the
+    frame path (``compiled.compile_mapper``).
     """
     if (took := compiled.compile_mapper()) > 1.0:
         log.info("compiled the mapper's loops in %.1f s (once; cached for later starts)", took)
