@@ -81,7 +81,7 @@ class WallMap:
 
         ``start_walls``: whether an observation no wall takes starts one (id -1 where not).
         """
-        pose_vec = pose.vector
+        pose_vec = plain(pose.vector, np.float64)  # the compiled loops take one kind of array
         pose_cov = plain(pose.cov if pose.cov is not None else self.config.pose_cov, np.float64)
         depth = frame.sensor == "depth"
         ids = [
@@ -139,8 +139,8 @@ class WallMap:
             rays,
             length,
             limit,
-            np.array([wall.normal for wall in walls]),
-            np.array([wall.foot for wall in walls]),
+            np.array([wall.normal for wall in walls], dtype=np.float64),
+            np.array([wall.foot for wall in walls], dtype=np.float64),
             THROUGH_NEAR,
         )
         for k in np.unique(which):
@@ -193,9 +193,9 @@ class WallMap:
             return self.add_wall(obs, s, p, anchor, pose, stamp, depth=depth).id
         wall.set_state(
             *compiled.map_kernels().update(
-                wall.s,
-                wall.p,
-                wall.anchor,
+                plain(wall.s, np.float64),
+                plain(wall.p, np.float64),
+                plain(wall.anchor, np.float64),
                 plain(obs.closest, np.float64),
                 plain(obs.cov, np.float64),
                 pose,
@@ -241,13 +241,13 @@ class WallMap:
         if not walls:
             return None
         best = compiled.map_kernels().most_likely(
-            np.array([w.s for w in walls]),
-            np.array([w.p for w in walls]),
-            np.array([w.anchor for w in walls]),
+            np.array([w.s for w in walls], dtype=np.float64),
+            np.array([w.p for w in walls], dtype=np.float64),
+            np.array([w.anchor for w in walls], dtype=np.float64),
             plain(obs.closest, np.float64),
             plain(obs.cov, np.float64),
-            pose,
-            pose_cov,
+            plain(pose, np.float64),
+            plain(pose_cov, np.float64),
             self.config.gate,
         )
         return None if best < 0 else walls[best]

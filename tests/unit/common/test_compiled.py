@@ -2,26 +2,28 @@
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from test_band_kernels import MOUNT, cluttered_stack
 
-from wallmap.common import band_kernels, line_kernels, pose_kernels, room_kernels
+from wallmap.common import band_kernels, line_kernels, map_kernels, pose_kernels, room_kernels
 from wallmap.common.compiled import compile_all
 from wallmap.common.map_records import WallRecord
-from wallmap.common.messages import Frame, pack, unpack_frame
+from wallmap.common.messages import Frame, Observations, Pose, WallObservation, pack, unpack_frame
 from wallmap.offline import run_bag
 from wallmap.scene import Camera, write_scene_bag
 from wallmap.scene.floorplan import free_rays, generate_floorplan
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 from wallmap.services.mapper.room_map import RoomMap
+from wallmap.services.mapper.wall_map import WallMap
 
 
 def kernels() -> dict[str, object]:
     return {
         f"{module.__name__}.{name}": value
-        for module in (line_kernels, band_kernels, room_kernels, pose_kernels)
+        for module in (line_kernels, band_kernels, room_kernels, pose_kernels, map_kernels)
         for name, value in vars(module).items()
         if hasattr(value, "signatures")
     }
@@ -63,7 +65,7 @@ def test_a_rooms_update_runs_the_loops_compiled_at_install() -> None:
 
 
 def test_judged_poses_run_the_loops_compiled_at_install(tmp_path: Path) -> None:
-    """The pose judge's fit and association get the map's and the frame's arrays as they are."""
+    """The pose judge's and the map's loops get the map's and the frame's arrays as they are."""
     compile_all()
     before = {name: list(k.signatures) for name, k in kernels().items()}
     bag = tmp_path / "depth.bag"
@@ -93,3 +95,24 @@ def test_a_band_stack_is_picked_before_numba_is_loaded() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "(6, 30, 3) True False"
+
+
+def test_a_pose_in_whole_numbers_runs_the_map_s_loops_compiled_at_install() -> None:
+    """A pose given in ints (a caller's ``Pose(t, 0, 0, 0)``) is an int array to numpy."""
+    compile_all()
+    before = {name: list(k.signatures) for name, k in kernels().items()}
+    seen = WallObservation(
+        closest=np.array([2.0, 0.0]),
+        cov=np.eye(2) * 1e-3,
+        p0=np.array([2.0, -1.0]),
+        p1=np.array([2.0, 1.0]),
+        n_points=100,
+        rms=0.01,
+    )
+    wall_map = WallMap()
+    for seq in range(3):
+        frame = Observations("run", seq, float(seq), "base_link", [seen], False, np.zeros(2))
+        frame = replace(frame, rays=np.array([[3.0, 0.5], [1.0, -0.2]]))
+        assert wall_map.integrate(frame, Pose(float(seq), 0, 0, 0)) == [0]
+    after = {name: list(k.signatures) for name, k in kernels().items()}
+    assert after == before
