@@ -1,12 +1,13 @@
-"""The wall map's per-frame algebra, compiled (numba): association, update, see-through.
+"""The wall map's per-frame algebra, compiled (numba): the EKF update, the see-through test.
 
 ``WallMap.match`` scores an observation against every wall near it, on the innovation
-covariance ``S = H P H^T + R + J Q J^T`` (``ekf.innovation``), and the most likely wall within
-the gate takes the EKF update (``ekf.update``, Joseph form). In numpy each candidate's score
-and each update were some thirty calls on 2x2 arrays: a tenth of the mapper's time a frame. Here
-each is one pass, with the wall model as ``pose_kernels.linearized`` writes it out (the model
-of ``common.wall_model``, whose Jacobians are tested against numeric differentiation). So is
-the see-through test (``WallMap._see_through``): each of a frame's rays against each wall's line
+covariance ``S = H P H^T + R + J Q J^T`` (``ekf.innovation``; compiled, the pose judge's
+``pose_kernels.best_pairs``), and the most likely wall within the gate takes the EKF update
+(``ekf.update``, Joseph form). In numpy each candidate's score and each update were some
+thirty calls on 2x2 arrays: a tenth of the mapper's time a frame. Here the update is one pass,
+with the wall model as ``pose_kernels.linearized`` writes it out (the model of
+``common.wall_model``, whose Jacobians are tested against numeric differentiation). So is the
+see-through test (``WallMap._see_through``): each of a frame's rays against each wall's line
 near them, some forty small numpy calls a frame before. ``tests/unit/common/test_map_kernels.py``
 holds these to the numpy they stand for.
 
@@ -41,35 +42,6 @@ def _sandwich(a: Array, m: Array) -> Array:
                 total += a[i, u] * row
             out[i, j] = total
     return out
-
-
-@njit(cache=True, nogil=True)
-def most_likely(
-    s: Array,
-    p: Array,
-    anchor: Array,
-    z: Array,
-    r: Array,
-    pose: Array,
-    pose_cov: Array,
-    gate: float,
-) -> int:
-    """The wall (index into ``s``) most likely to have made ``z`` within ``gate``; -1: none.
-
-    Maximum Gaussian log-likelihood of the innovation under ``S``, among the walls whose
-    squared Mahalanobis distance is at most ``gate``; the first of equals.
-    """
-    predicted, by_state, by_pose = linearized(s, anchor, pose)
-    best, best_score = -1, -np.inf
-    for i in range(len(s)):
-        cov = _sandwich(by_state[i], p[i]) + r + _sandwich(by_pose[i], pose_cov)
-        e0, e1 = z[0] - predicted[i, 0], z[1] - predicted[i, 1]
-        det = cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[1, 0]
-        m2 = (cov[1, 1] * e0**2 - (cov[0, 1] + cov[1, 0]) * e0 * e1 + cov[0, 0] * e1**2) / det
-        score = -0.5 * (m2 + math.log(det)) - math.log(2.0 * math.pi)
-        if m2 <= gate and score > best_score:
-            best, best_score = i, score
-    return best
 
 
 @njit(cache=True, nogil=True)
@@ -162,7 +134,6 @@ def warm_up() -> None:
     s, p, anchor = np.array([[1.0, 0.2]]), np.array([np.eye(2) * 1e-4]), np.zeros((1, 2))
     z, r = np.array([1.0, 0.25]), np.eye(2) * 1e-3
     pose, pose_cov = np.array([0.1, 0.0, 0.05]), np.eye(3) * 1e-4
-    most_likely(s, p, anchor, z, r, pose, pose_cov, 13.8)
     update(s[0], p[0], anchor[0], z, r, pose, pose_cov)
     start, rays, length, limit, _ = rays_in_map(np.zeros(2), np.ones((2, 2)), pose, 0.1, 3e-3)
     crossings(start, rays, length, limit, np.array([[1.0, 0.0]]), np.array([[0.5, 0.0]]), 0.3)

@@ -240,17 +240,21 @@ class WallMap:
         walls = [w for w in self.near_observation(obs, pose) if w.n_obs >= min_obs]
         if not walls:
             return None
-        best = compiled.map_kernels().most_likely(
+        n = len(walls)
+        z, r = np.empty((n, 2)), np.empty((n, 2, 2))  # the observation, once for each wall
+        z[:], r[:] = obs.closest, obs.cov
+        best = compiled.pose_kernels().best_pairs(
             np.array([w.s for w in walls], dtype=np.float64),
             np.array([w.p for w in walls], dtype=np.float64),
             np.array([w.anchor for w in walls], dtype=np.float64),
-            plain(obs.closest, np.float64),
-            plain(obs.cov, np.float64),
+            z,
+            r,
             plain(pose, np.float64),
             plain(pose_cov, np.float64),
+            np.zeros(n, dtype=np.int64),  # all pairs are the one observation's
             self.config.gate,
         )
-        return None if best < 0 else walls[best]
+        return walls[best[0]] if len(best) else None
 
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""

@@ -1,10 +1,10 @@
-"""The wall map's compiled association and update, against the numpy EKF they stand for."""
+"""The wall map's compiled association, update and see-through, against the numpy they replace."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wallmap.common import ekf, map_kernels
+from wallmap.common import ekf, map_kernels, pose_kernels
 
 Array = np.ndarray
 
@@ -27,6 +27,17 @@ def _numpy_choice(
     return best
 
 
+def _compiled_choice(
+    s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array, gate: float
+) -> int:
+    """``WallMap.match``'s choice now: one observation's pairs, the judge's ``best_pairs``."""
+    n = len(s)
+    one = np.zeros(n, dtype=np.int64)
+    z, r = np.tile(z, (n, 1)), np.tile(r, (n, 1, 1))
+    best = pose_kernels.best_pairs(s, p, anchor, z, r, pose, pose_cov, one, gate)
+    return int(best[0]) if len(best) else -1
+
+
 def test_the_most_likely_wall_is_the_numpy_ekf_s_choice() -> None:
     """Near walls whose scores differ by little, some outside the gate: the same pick always."""
     rng = np.random.default_rng(3)
@@ -41,7 +52,7 @@ def test_the_most_likely_wall_is_the_numpy_ekf_s_choice() -> None:
         z = z + rng.normal(0, 0.05, 2)
         gate = ekf.CHI2_2DOF_999
         want = _numpy_choice(s, p, anchor, z, r, pose, pose_cov, gate)
-        assert map_kernels.most_likely(s, p, anchor, z, r, pose, pose_cov, gate) == want
+        assert _compiled_choice(s, p, anchor, z, r, pose, pose_cov, gate) == want
         picked.add(want)
     assert {-1, 0} <= picked  # both outcomes were tried: in the gate and out of it
 
@@ -50,7 +61,7 @@ def test_ties_go_to_the_first_wall() -> None:
     s, p, anchor = np.array([[2.0, 0.0]] * 3), np.array([np.eye(2) * 1e-3] * 3), np.zeros((3, 2))
     z, r = np.array([2.0, 0.0]), np.eye(2) * 1e-3
     pose, pose_cov = np.zeros(3), np.eye(3) * 1e-4
-    assert map_kernels.most_likely(s, p, anchor, z, r, pose, pose_cov, 13.8) == 0
+    assert _compiled_choice(s, p, anchor, z, r, pose, pose_cov, 13.8) == 0
 
 
 def test_the_update_is_the_numpy_ekf_update() -> None:
