@@ -57,7 +57,7 @@ def pose_kernels() -> ModuleType:
 
 @functools.cache
 def map_kernels() -> ModuleType:
-    """``common/map_kernels.py``: the wall map's association and update."""
+    """``common/map_kernels.py``: the wall map's EKF update and see-through test."""
     from wallmap.common import map_kernels as module  # noqa: PLC0415 - see the module's doc
 
     return module
