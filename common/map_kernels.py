@@ -28,23 +28,6 @@ Array = NDArray[np.float64]
 
 
 @njit(cache=True, nogil=True)
-def _sandwich(a: Array, m: Array) -> Array:
-    """``a m a^T`` for a 2xk ``a`` and a kxk ``m``."""
-    k = m.shape[0]
-    out = np.zeros((2, 2))
-    for i in range(2):
-        for j in range(2):
-            total = 0.0
-            for u in range(k):
-                row = 0.0
-                for v in range(k):
-                    row += m[u, v] * a[j, v]
-                total += a[i, u] * row
-            out[i, j] = total
-    return out
-
-
-@njit(cache=True, nogil=True)
 def update(
     s: Array, p: Array, anchor: Array, z: Array, r: Array, pose: Array, pose_cov: Array
 ) -> tuple[Array, Array]:
@@ -54,15 +37,15 @@ def update(
     ``P`` positive for the tiny covariances of walls seen thousands of times.
     """
     predicted, by_state, by_pose = linearized(s.reshape(1, 2), anchor.reshape(1, 2), pose)
-    h = by_state[0]
-    noise = r + _sandwich(by_pose[0], pose_cov)
-    cov = _sandwich(h, p) + noise
+    h, j = by_state[0], by_pose[0]
+    noise = r + _mm(_mm(j, pose_cov), j.T.copy())
+    cov = _mm(_mm(h, p), h.T.copy()) + noise
     det = cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[1, 0]
     inverse = np.array([[cov[1, 1], -cov[0, 1]], [-cov[1, 0], cov[0, 0]]]) / det
     gain = _mm(_mm(p, h.T.copy()), inverse)
     s_new = s + _mv(gain, z - predicted[0])
     i_kh = np.eye(2) - _mm(gain, h)
-    p_new = _sandwich(i_kh, p) + _sandwich(gain, noise)
+    p_new = _mm(_mm(i_kh, p), i_kh.T.copy()) + _mm(_mm(gain, noise), gain.T.copy())
     return s_new, 0.5 * (p_new + p_new.T)
 
 
