@@ -58,6 +58,9 @@ class MapperCore:
         # UPDATE_PERIOD alone, it would see 150 frames old ones).
         self.update_due = threading.Event()
         self.updated_frames = self.map.frames
+        # Whether anything subscribes to the map updates (Zenoh's matching status, set from its
+        # callback): with nobody listening the changes wait, unbuilt, for the next one that does.
+        self.updates_wanted = True
         # Each run's progress, with this process's epoch in every acknowledgement.
         self.progress = RunProgress(runs, epoch=uuid.uuid4().hex[:12])
         self._replies: dict[tuple[object, ...], bytes] = {}  # encoded, for one map state

@@ -143,7 +143,11 @@ class Intake:
         if core.judge is not None:
             core.pose_source = core.judge.summary()
         core.dirty = True
-        if core.map.frames - core.updated_frames >= UPDATE_FRAMES:
+        if (
+            core.updates_wanted
+            and core.map.frames - core.updated_frames >= UPDATE_FRAMES
+            and not core.update_due.is_set()
+        ):
             core.update_due.set()
 
     def _done(self, obs: Observations, *, integrated: bool) -> None:

@@ -82,6 +82,10 @@ def run(
     with open_session(settings, count=stats.add, stop=stop) as session:
         progress = session.declare_publisher(keys.progress)
         updates = session.declare_publisher(keys.map_updates)
+        core.updates_wanted = updates.matching_status.matching
+        listening = updates.declare_matching_listener(
+            lambda status: setattr(core, "updates_wanted", status.matching)
+        )
         corrected = CorrectedPoses(session, keys, log) if core.corrector is not None else None
         ros2 = Ros2Outlet(session, keys) if mapper.ros2_out else None
         observe = (progress, mapper.pose_wait, mapper.gap_wait, corrected)
@@ -108,7 +112,7 @@ def run(
             save(core, mapper.state, config)
         log.info("stopping: %s", stats.snapshot())
         token.undeclare()
-        for entity in (poses, observations, queryable, rooms, *([ros2] if ros2 else [])):
+        for entity in (poses, observations, queryable, listening, rooms, *([ros2] if ros2 else [])):
             entity.undeclare()
         for worker in (poses, observations, *workers):
             worker.join(timeout=5.0)
@@ -225,20 +229,26 @@ def _updates(
 
     An update goes every UPDATE_PERIOD s, or sooner once UPDATE_FRAMES frames were integrated,
     when walls changed or frames were integrated (its frames and stamp say how current the map
-    is). The markers (the whole served map, rebuilt: tens of ms for a thousand walls) go at
-    most every UPDATE_PERIOD s, and once more after the last change.
+    is); while nothing subscribes to them, the changes are held (``serving.HeldChanges``). The
+    markers (the whole served map, rebuilt: tens of ms for a thousand walls) go at most every
+    UPDATE_PERIOD s, and once more after the last change.
     """
     markers_stale, markers_due = False, 0.0
+    held = serving.HeldChanges()  # while nothing subscribes to the updates
     while not stop.is_set():
         core.update_due.wait(UPDATE_PERIOD)
         core.update_due.clear()
-        served = None
+        served, changes = None, None
         with core.lock:
             changed = bool(core.map.changed or core.map.removed)
-            grown = changed or core.map.frames != core.updated_frames
-            changes = serving.take_changes(core.map) if grown else None
-            core.updated_frames = core.map.frames
             markers_stale |= changed
+            if core.updates_wanted:
+                held.give_back(core.map)
+                if core.map.changed or core.map.removed or core.map.frames != core.updated_frames:
+                    changes = serving.take_changes(core.map)
+            else:
+                held.hold(core.map)
+            core.updated_frames = core.map.frames
             if ros2 is not None and markers_stale and time.monotonic() >= markers_due:
                 served = serving.reply(core.map, MapQuery(trajectory=True))
                 markers_stale, markers_due = False, time.monotonic() + UPDATE_PERIOD

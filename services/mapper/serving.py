@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -233,6 +234,35 @@ def take_changes(wall_map: WallMap) -> MapUpdate:
     wall_map.changed.clear()
     wall_map.removed.clear()
     return MapUpdate(wall_map.frames, wall_map.stamp, walls, removed)
+
+
+@dataclass
+class HeldChanges:
+    """The map's changes taken off it while nothing subscribes to its updates, not yet built.
+
+    Building an update (what is served, the corners, a record of every wall changed and of its
+    neighbours) costs a mapper about a tenth of a millisecond a frame, for nobody when nothing
+    listens; Zenoh would drop the message. Held, the changes go out whole with the first update
+    someone hears, so a subscriber the mapper had not yet heard of misses none of them.
+    """
+
+    changed: set[int] = field(default_factory=set)
+    removed: set[int] = field(default_factory=set)
+
+    def hold(self, wall_map: WallMap) -> None:
+        """Take the map's changes since the last update into the held ones."""
+        self.changed |= wall_map.changed
+        self.removed |= wall_map.removed
+        wall_map.changed.clear()
+        wall_map.removed.clear()
+
+    def give_back(self, wall_map: WallMap) -> None:
+        """Put the held changes back for :func:`take_changes`: walls still there, ids gone."""
+        walls = wall_map.walls
+        wall_map.changed.update(i for i in self.changed if i in walls)
+        wall_map.removed.update(i for i in self.removed if i not in walls)
+        self.changed.clear()
+        self.removed.clear()
 
 
 def record(wall: Wall, segments: Array, *, tentative: bool) -> WallRecord:

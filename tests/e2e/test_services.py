@@ -120,6 +120,27 @@ def test_map_updates_stream_the_walls_as_they_change(stack, small_bag):
 
 
 @pytest.mark.e2e
+def test_map_updates_nobody_heard_go_to_the_first_subscriber(stack, small_bag):
+    """Played with nothing subscribed, the changes are held, then sent whole to who comes."""
+    stack.start("mapper", "mapper", *stack.zenoh_args)
+    stack.start("detector", "detector", *stack.zenoh_args)
+    assert stack.run("player", str(small_bag), "--fast", *stack.zenoh_args).returncode == 0
+    with open_session(ZenohSettings(connect=(stack.endpoint,), prefix=stack.prefix)) as session:
+        sub = session.declare_subscriber(
+            Keys(stack.prefix).map_updates, zenoh.handlers.FifoChannel(1000)
+        )
+        deadline = time.monotonic() + 5.0
+        while (sample := sub.try_recv()) is None:
+            assert time.monotonic() < deadline, "no update came to a late subscriber"
+            time.sleep(0.05)
+        update = decode(sample.payload.to_bytes())
+    walls = {w["id"]: w for w in stack.query("--tentative")["walls"]}
+    assert walls, "the bag maps walls"
+    assert {w["id"]: w for w in update["walls"]} == walls
+    assert update["frames"] == stack.query()["frames"]
+
+
+@pytest.mark.e2e
 def test_query_filters_from_the_command_line(stack, small_bag):
     stack.start("mapper", "mapper", *stack.zenoh_args)
     stack.start("detector", "detector", *stack.zenoh_args)

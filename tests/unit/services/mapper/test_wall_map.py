@@ -218,6 +218,43 @@ def test_walls_that_converge_onto_one_line_merge_and_the_older_id_survives(tmp_p
     assert reply(again, MapQuery(tentative=True)) == reply(wall_map, MapQuery(tentative=True))
 
 
+def test_changes_held_while_nothing_listens_go_out_whole_with_the_next_update():
+    """A subscriber's copy of the map, from updates with a stretch held between, is the map."""
+    wall_map = WallMap()
+    cov = np.eye(2) * 1e-4
+    view: dict[int, dict] = {}  # what a subscriber that applies the updates holds
+
+    def seen(x0, x1, stamp):
+        obs = WallObservation(
+            np.array([0.0, 2.0]), cov, np.array([x0, 2.0]), np.array([x1, 2.0]), 40, 0.01
+        )
+        wall_map.integrate(Observations("r", 0, stamp, "base_link", [obs]), Pose(stamp, 0, 0, 0))
+
+    def hear(update):
+        for wall in update["walls"]:
+            view[wall["id"]] = wall
+        for gone in update["removed"]:
+            view.pop(gone, None)
+
+    seen(-6.0, -4.0, 1.0)
+    seen(-6.0, -4.0, 1.1)
+    hear(serving.take_changes(wall_map).to_map())
+    assert list(view) == [0]
+    held = serving.HeldChanges()
+    seen(-1.5, 2.0, 2.0)  # another wall, with nothing listening...
+    seen(-1.5, 2.0, 2.1)
+    held.hold(wall_map)
+    assert (wall_map.changed, wall_map.removed, held.changed) == (set(), set(), {1})
+    seen(-4.5, -1.0, 3.0)  # ...that merges into the first while held
+    seen(-4.5, -1.0, 3.1)
+    held.hold(wall_map)
+    held.give_back(wall_map)
+    assert (wall_map.changed, wall_map.removed) == ({0}, {1})  # only walls that are there
+    hear(serving.take_changes(wall_map).to_map())
+    assert view == {w["id"]: w for w in reply(wall_map, MapQuery(tentative=True))["walls"]}
+    assert (held.changed, held.removed) == (set(), set())
+
+
 def test_two_faces_of_a_real_wall_stay_apart():
     wall_map = WallMap()
     cov = np.eye(2) * 1e-4
