@@ -14,6 +14,7 @@ import numpy as np
 
 from wallmap.common.pose3d import Quaternion, Vector3, slerp, transform_matrix
 from wallmap.common.pose3d import invert as _inverse
+from wallmap.common.pose3d_batch import invert_many, slerp_many, transform_matrices
 
 __all__ = ["TfBuffer", "TfError", "normalize_frame", "transform_matrix"]
 
@@ -92,6 +93,35 @@ class _Edge:
             weight,
         )
         return transform_matrix(tuple(translation.tolist()), rotation)
+
+    def matrices_at(self, stamps: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+        """``matrix_at`` at many stamps: (n, 4, 4), and which are within ``tolerance``.
+
+        Where ``matrix_at`` would raise (extrapolation beyond the tolerance), the matrix is the
+        nearest sample's and the stamp is marked not found.
+        """
+        if self._static_matrix is not None:
+            return np.broadcast_to(self._static_matrix, (len(stamps), 4, 4)), np.ones(
+                len(stamps), dtype=bool
+            )
+        if self._pending:
+            self._freeze()
+        known = self._stamps
+        index = known.searchsorted(stamps)
+        upper = np.minimum(index, known.size - 1)
+        sampled = (index == known.size) | (known[upper] == stamps) | (index == 0)
+        found = ~(
+            ((index == 0) & (known[0] - stamps > tolerance))
+            | ((index == known.size) & (stamps - known[-1] > tolerance))
+        )
+        lower = np.where(sampled, upper, index - 1)
+        t0, t1 = known[lower], known[upper]
+        weight = np.where(sampled, 0.0, (stamps - t0) / np.where(sampled, 1.0, t1 - t0))
+        p0, p1 = self._translations[lower], self._translations[upper]
+        q0, q1 = self._quaternions[lower], self._quaternions[upper]
+        # A sample is taken as it is; between two, the rotation along the shorter arc.
+        rotation = np.where(sampled[:, None], q1, slerp_many(q0, q1, weight))
+        return transform_matrices(p0 + (p1 - p0) * weight[:, None], rotation), found
 
     def _sample(self, index: int) -> np.ndarray:
         return transform_matrix(
@@ -236,6 +266,30 @@ class TfBuffer:
             step = edge.matrix_at(stamp, slack, query)
             result = (step if upward else _inverse(step)) @ result
         return result
+
+    def lookup_many(
+        self, target: str, source: str, stamps: np.ndarray, *, tolerance: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``lookup`` at many stamps at once: (n, 4, 4) transforms, and which stamps have one.
+
+        A stamp ``lookup`` would refuse for extrapolation is marked not found (its matrix is
+        meaningless); an unknown frame or a missing path raises TfError as ``lookup`` does.
+        """
+        target, source = normalize_frame(target), normalize_frame(source)
+        stamps = np.asarray(stamps, dtype=np.float64)
+        result = np.broadcast_to(np.eye(4), (len(stamps), 4, 4))
+        found = np.ones(len(stamps), dtype=bool)
+        if target == source:
+            return result, found
+        path = self._path(target, source)
+        if path is None:
+            raise TfError(self.no_path_message(target, source))
+        slack = self.tolerance if tolerance is None else tolerance
+        for edge, upward in path:
+            step, ok = edge.matrices_at(stamps, slack)
+            result = (step if upward else invert_many(step)) @ result
+            found &= ok
+        return result, found
 
     def moving_frame(self, fixed: str, sensor: str) -> str | None:
         """The frame that moves in ``fixed`` and carries ``sensor``: a pose source's child.

@@ -14,7 +14,7 @@ from wallmap.common import se2
 from wallmap.common.messages import Pose
 from wallmap.common.ros_poses import header_stamp
 from wallmap.common.scan_row import RowSelection
-from wallmap.common.tf_buffer import normalize_frame
+from wallmap.common.tf_buffer import TfError, normalize_frame
 from wallmap.services.player.bag_contents import LASERSCAN, POINTCLOUD2
 from wallmap.services.player.bag_file import BagFile
 from wallmap.services.player.choices import Plan, SensorChoice, SurveyFrame, choose_mount
@@ -96,6 +96,17 @@ class BagFrames(ClosingSource):
     def pose_at(self, stamp: float) -> Pose | None:
         """The base frame's 6-DoF pose at a stamp, or None where the source does not cover it."""
         return self._plan.poses.at(stamp)
+
+    def planar_poses_at(self, stamps: np.ndarray) -> list[Pose | None]:
+        """The planar poses at some stamps: a tf chain's all at once, others one by one."""
+        poses = self._plan.poses
+        try:
+            found = poses.matrices_at(stamps)
+        except TfError:  # as ``at`` finds it: no pose at any stamp
+            return [None] * len(stamps)
+        if found is None:
+            return self.placement.planar_each(self.pose_at, stamps)
+        return self.placement.planar_many(stamps, *found, poses.spec.parent, poses.base_frame)
 
     @property
     def pose_stamps(self) -> np.ndarray | None:

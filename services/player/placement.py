@@ -10,6 +10,7 @@ the detector needs them to find the band.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -19,6 +20,7 @@ from numpy.typing import NDArray
 from wallmap.common.level import Level, level_from_frames
 from wallmap.common.messages import Pose
 from wallmap.common.pose3d import FORWARD_Z, forward_axis, split_planar
+from wallmap.common.pose3d_batch import headings
 from wallmap.common.scan_row import DEFAULT_BAND, auto_band
 
 Array = NDArray[np.float64]
@@ -69,6 +71,31 @@ class Placement:
         x, y, yaw, tilt = split_planar(self.levelling @ pose.matrix, self.forward)
         planar = Pose(pose.stamp, x, y, yaw, pose.cov, pose.frame, pose.child)
         return planar, tilt @ mount
+
+    def planar_each(
+        self, pose_at: Callable[[float], Pose | None], stamps: Array
+    ) -> list[Pose | None]:
+        """The planar poses of a source's 6-DoF ones at ``stamps``, one ``place`` at a time."""
+        identity = np.eye(4)
+        return [self.place(pose_at(stamp), identity)[0] for stamp in stamps.tolist()]
+
+    def planar_many(
+        self, stamps: Array, matrices: Array, found: NDArray[np.bool_], frame: str, child: str
+    ) -> list[Pose | None]:
+        """The planar poses of (n, 4, 4) 6-DoF ones at once (``place``'s, without the tilt).
+
+        ``found`` says which stamps have a pose; the others are None. ``frame`` and ``child``
+        name the poses' frames.
+        """
+        levelled = self.levelling @ matrices
+        yaws = headings(levelled[:, :3, :3], self.forward).tolist()
+        xs, ys = levelled[:, 0, 3].tolist(), levelled[:, 1, 3].tolist()
+        return [
+            Pose(stamp, x, y, yaw, None, frame, child) if ok else None
+            for stamp, x, y, yaw, ok in zip(
+                stamps.tolist(), xs, ys, yaws, found.tolist(), strict=True
+            )
+        ]
 
     def describe(self) -> str:
         """One line for people: the level found and the band."""

@@ -20,32 +20,31 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wallmap.common.messages import Pose
-from wallmap.services.player.placement import Placement
 
 POSE_PERIOD = 0.02  # s between the grid's poses
 LOOKAHEAD = 0.6  # s past the next frame's stamp: more than any latency the mapper takes
 DROPOUT = 0.1  # s from the nearest pose of the source: farther, a grid pose is not sent
 SAME_STAMP = 1e-6  # s: a frame's stamp this close to a sent pose's is that stamp
+AHEAD = 50  # grid poses worked out at once (a second of them): one at a time costs 20x more
+
+PosesAt = Callable[[NDArray[np.float64]], list[Pose | None]]
 
 
 class PoseStream:
     """The poses of a source up to each frame's stamp plus ``LOOKAHEAD``, each sent once.
 
     Args:
-        pose_at: The planar pose at a stamp, or None where the source has none.
+        poses_at: The planar poses at some stamps, None where the source has none.
         stamps: The source's own pose stamps where it has a list of them (a topic, a TUM
             file), to leave its dropouts as gaps; None for tf, looked up as tf does.
     """
 
-    def __init__(
-        self,
-        pose_at: Callable[[float], Pose | None],
-        stamps: NDArray[np.float64] | None = None,
-    ) -> None:
-        self._pose_at = pose_at
+    def __init__(self, poses_at: PosesAt, stamps: NDArray[np.float64] | None = None) -> None:
+        self._poses_at = poses_at
         self._stamps = stamps
         self._sent: float | None = None  # the newest grid stamp looked at
         self._newest: float | None = None  # the newest stamp sent
+        self._ahead: dict[int, Pose | None] = {}  # grid poses worked out, by grid index
 
     def until(self, frame_stamp: float) -> list[Pose]:
         """The poses to send before the frame stamped ``frame_stamp``: the grid's, each once.
@@ -62,23 +61,31 @@ class PoseStream:
         start = frame_stamp - LOOKAHEAD  # after a seek forward, no more than that back
         if self._sent is not None:
             start = max(start, self._sent)
-        grid = POSE_PERIOD * np.arange(
-            math.floor(start / POSE_PERIOD) + 1, math.floor(horizon / POSE_PERIOD) + 1
-        )
-        poses = [pose for stamp in grid.tolist() if (pose := self._pose(stamp)) is not None]
-        self._sent = max(self._sent or start, float(grid[-1]) if len(grid) else start)
+        first, end = math.floor(start / POSE_PERIOD) + 1, math.floor(horizon / POSE_PERIOD) + 1
+        poses = [pose for k in range(first, end) if (pose := self._grid_pose(k)) is not None]
+        self._sent = max(self._sent or start, POSE_PERIOD * (end - 1) if end > first else start)
         newest = poses[-1].stamp if poses else self._newest
         if newest is None or frame_stamp > newest + SAME_STAMP:
-            own = self._pose(frame_stamp)
+            (own,) = self._poses(np.array([frame_stamp]))
             if own is not None:
                 poses.append(own)
                 newest = frame_stamp
         self._newest = newest
         return poses
 
-    def _pose(self, stamp: float) -> Pose | None:
-        """The source's pose at ``stamp``, or None in a dropout or beyond its poses."""
-        return self._pose_at(stamp) if self._covered(stamp) else None
+    def _grid_pose(self, k: int) -> Pose | None:
+        """The grid's ``k``-th pose (at ``k * POSE_PERIOD``), the next AHEAD worked out with it."""
+        if k not in self._ahead:
+            ks = np.arange(k, k + AHEAD)
+            self._ahead = dict(zip(ks.tolist(), self._poses(POSE_PERIOD * ks), strict=True))
+        return self._ahead[k]
+
+    def _poses(self, stamps: NDArray[np.float64]) -> list[Pose | None]:
+        """The source's poses at ``stamps``, None in a dropout or beyond its poses."""
+        return [
+            pose if self._covered(stamp) else None
+            for stamp, pose in zip(stamps.tolist(), self._poses_at(stamps), strict=True)
+        ]
 
     def _covered(self, stamp: float) -> bool:
         """Whether the source has a pose within ``DROPOUT`` of ``stamp``."""
@@ -92,10 +99,8 @@ class PoseStream:
 class PosedSource(Protocol):
     """What a stream is made from: a bag or a TUM folder."""
 
-    placement: Placement
-
-    def pose_at(self, stamp: float) -> Pose | None:
-        """The 6-DoF pose at a stamp, or None."""
+    def planar_poses_at(self, stamps: NDArray[np.float64]) -> list[Pose | None]:
+        """The planar poses (levelled, as its frames') at some stamps, None where it has none."""
         ...
 
     @property
@@ -106,8 +111,4 @@ class PosedSource(Protocol):
 
 def stream_of(source: PosedSource) -> PoseStream:
     """The pose stream of a source: its poses levelled and made planar as its frames' are."""
-    identity = np.eye(4)
-    return PoseStream(
-        lambda stamp: source.placement.place(source.pose_at(stamp), identity)[0],
-        source.pose_stamps,
-    )
+    return PoseStream(source.planar_poses_at, source.pose_stamps)

@@ -189,6 +189,10 @@ class TumFolder(ClosingSource):
         """The camera's 6-DoF pose at a stamp, or None where the trajectory does not cover it."""
         return None if self._track is None else self._track.at(stamp, tolerance=POSE_TOLERANCE)
 
+    def planar_poses_at(self, stamps: np.ndarray) -> list[Pose | None]:
+        """The planar poses at some stamps, None where the trajectory does not cover them."""
+        return self.placement.planar_each(self.pose_at, stamps)
+
     @property
     def pose_stamps(self) -> np.ndarray | None:
         """The trajectory's own stamps (None without one): where its dropouts are."""

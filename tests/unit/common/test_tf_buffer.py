@@ -167,3 +167,22 @@ def test_many_lookups_are_fast() -> None:
     for stamp in stamps:
         tf.lookup("map", "camera_optical", stamp)
     assert time.perf_counter() - start < 10.0  # ~25 us each; a linear scan would take minutes
+
+
+def test_lookups_at_many_stamps_are_the_lookups_one_by_one() -> None:
+    """Samples, between them, both ends within and beyond the tolerance, both directions."""
+    tf = robot_tree()
+    stamps = np.array([9.0, 9.96, 10.0, 10.3, 11.0, 11.5, 11.999, 12.0, 12.04, 12.5])
+    for target, source in (("map", "base_link"), ("camera_optical", "map"), ("laser", "odom")):
+        many, found = tf.lookup_many(target, source, stamps, tolerance=0.05)
+        for stamp, matrix, ok in zip(stamps, many, found, strict=True):
+            try:
+                one = tf.lookup(target, source, float(stamp), tolerance=0.05)
+            except TfError:
+                assert not ok, stamp
+                continue
+            assert ok, stamp
+            np.testing.assert_allclose(matrix, one, rtol=0, atol=1e-14)
+    assert tf.lookup_many("map", "map", stamps)[1].all()
+    with pytest.raises(TfError, match="nowhere"):
+        tf.lookup_many("map", "nowhere", stamps)

@@ -20,8 +20,13 @@ def _line(stamp: float) -> Pose:
     return Pose(stamp, 0.5 * stamp, 0.0, 0.1 * stamp)
 
 
+def _each(pose_at):
+    """A stream's source of poses at many stamps, from one at a stamp."""
+    return lambda stamps: [pose_at(stamp) for stamp in stamps.tolist()]
+
+
 def test_poses_go_out_up_to_the_lookahead_once_each() -> None:
-    stream = PoseStream(_line)
+    stream = PoseStream(_each(_line))
     grid = [p.stamp for p in stream.until(10.0)]
     assert grid[0] == pytest.approx(10.0 - LOOKAHEAD + POSE_PERIOD)
     assert grid[-1] == pytest.approx(10.0 + LOOKAHEAD)
@@ -33,7 +38,9 @@ def test_poses_go_out_up_to_the_lookahead_once_each() -> None:
 
 def test_a_frame_past_the_source_s_last_pose_gets_its_own_as_the_newest() -> None:
     """Off the grid a frame's pose is interpolated, except past the source's end: it is sent."""
-    stream = PoseStream(lambda t: _line(t) if t <= 10.005 else None)  # as tf: no pose past it
+    stream = PoseStream(
+        _each(lambda t: _line(t) if t <= 10.005 else None)
+    )  # as tf: no pose past it
     sent = [p.stamp for p in stream.until(9.5)]
     assert 9.5 in sent  # on the grid
     assert not [s for s in stream.until(9.91) if abs(s.stamp - 9.91) < 1e-9]  # 9.92 is sent
@@ -43,7 +50,7 @@ def test_a_frame_past_the_source_s_last_pose_gets_its_own_as_the_newest() -> Non
 
 def test_a_dropout_is_left_a_gap_and_a_seek_back_starts_afresh() -> None:
     stamps = np.concatenate([np.arange(0.0, 5.0, 0.01), np.arange(5.6, 10.0, 0.01)])
-    stream = PoseStream(_line, stamps)
+    stream = PoseStream(_each(_line), stamps)
     sent = [p.stamp for p in stream.until(5.2)]
     assert not any(5.1 < s < 5.5 for s in sent)
     assert stream.until(1.0)[0].stamp == pytest.approx(1.0 - LOOKAHEAD + POSE_PERIOD)
@@ -102,6 +109,29 @@ def test_faults_make_a_source_late_noisy_and_wrong_for_a_while() -> None:
 
 def test_every_stamp_is_sent_once_where_frames_fall_on_the_grid() -> None:
     """15 Hz frames fall on the 50 Hz grid every 0.2 s: their pose is not sent twice."""
-    stream = PoseStream(lambda t: Pose(t, t, 0.0, 0.0))
+    stream = PoseStream(_each(lambda t: Pose(t, t, 0.0, 0.0)))
     stamps = [p.stamp for k in range(60) for p in stream.until(1700000000.0 + k / 15)]
     assert len(stamps) == len(set(round(s, 6) for s in stamps))
+
+
+def test_a_tf_bag_s_poses_at_once_are_its_poses_one_by_one(tmp_path) -> None:
+    """A second of the grid at once (a tf chain's lookups batched): the same planar poses."""
+    from wallmap.scene import Camera, write_scene_bag
+    from wallmap.services.player.sources import open_source
+
+    bag = tmp_path / "s.bag"
+    write_scene_bag(bag, seed=2, n_frames=40, fmt="ros1", sensor="depth16", camera=Camera(80, 60))
+    with open_source(bag) as source:
+        stamps = [frame.stamp for frame, _ in source.frames()]
+        grid = np.concatenate(
+            [np.arange(stamps[0] - 1.0, stamps[-1] + 1.0, POSE_PERIOD), stamps[:5]]
+        )
+        many = source.planar_poses_at(grid)
+        one_by_one = source.placement.planar_each(source.pose_at, grid)
+    assert [p is None for p in many] == [p is None for p in one_by_one]
+    assert any(p is None for p in many), "stamps beyond the poses have none"
+    assert sum(p is not None for p in many) > 100
+    for a, b in zip(many, one_by_one, strict=True):
+        if a is not None and b is not None:
+            assert (a.stamp, a.frame, a.child, a.cov) == (b.stamp, b.frame, b.child, b.cov)
+            assert a.vector == pytest.approx(b.vector, abs=1e-12)
