@@ -1,7 +1,7 @@
 """The rigid transforms of ``pose3d`` over arrays of them at once: a stream of poses, ahead.
 
 A player sends its pose source's poses on a 50 Hz grid, three for each frame of a 15 Hz camera;
-one at a time, through the scalar helpers, they cost a third of its work on each frame. The same
+one at a time, through the scalar helpers, they cost a quarter of its work on each frame. The same
 formulas over a second of the grid at once cost a few microseconds a pose. Each function here
 agrees with its scalar twin in ``pose3d`` to rounding (tested side by side).
 """

@@ -25,7 +25,7 @@ POSE_PERIOD = 0.02  # s between the grid's poses
 LOOKAHEAD = 0.6  # s past the next frame's stamp: more than any latency the mapper takes
 DROPOUT = 0.1  # s from the nearest pose of the source: farther, a grid pose is not sent
 SAME_STAMP = 1e-6  # s: a frame's stamp this close to a sent pose's is that stamp
-AHEAD = 50  # grid poses worked out at once (a second of them): one at a time costs 20x more
+AHEAD = 50  # grid poses worked out at once (a second of them): a seventh of one at a time
 
 PosesAt = Callable[[NDArray[np.float64]], list[Pose | None]]
 
