@@ -27,11 +27,6 @@ from wallmap.common.link_settings import DEFAULT_PREFIX, TransportError, ZenohSe
 # 1 s and doubles to 4 s, which adds up to 4 s of loss after the router is back; a connect
 # attempt to a loopback or LAN router costs next to nothing.
 RECONNECT = "{period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2}"
-# Zenoh's shared-memory transport, on by default, kept about 20 MB in the router and in every
-# subscriber for each session that had sent messages above its 3 kB threshold, after the session
-# ended: a router and a detector grew by that much with every bag played (460 and 580 MB after
-# 20). Over loopback the frames go as fast without it. Off unless a config file speaks of it.
-SHARED_MEMORY = "transport/shared_memory/enabled"
 
 
 class StoppedWaiting(Exception):  # noqa: N818 - a stop asked for, not an error
@@ -88,13 +83,10 @@ def make_config(
             conf.insert_json5("scouting/multicast/enabled", "false")
         if "retry" not in text:
             conf.insert_json5("connect/retry", RECONNECT)
-        if "shared_memory" not in text:
-            conf.insert_json5(SHARED_MEMORY, "false")
     else:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("connect/retry", RECONNECT)
-        conf.insert_json5(SHARED_MEMORY, "false")
     conf.insert_json5("mode", json.dumps(mode))
     if mode == "router":
         _insert_endpoints(conf, "listen", listen)

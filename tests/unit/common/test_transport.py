@@ -23,14 +23,3 @@ def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):
     assert asked.get_json("scouting/multicast/enabled") == "true"
     waiting = make_config(ZenohSettings(wait_for_router=float("inf")))
     assert waiting.get_json("connect/timeout_ms") == "-1"
-
-
-def test_shared_memory_off_unless_a_config_file_speaks_of_it(tmp_path):
-    assert make_config(ZenohSettings()).get_json("transport/shared_memory/enabled") == "false"
-    file = tmp_path / "z.json5"
-    file.write_text("{ transport: { shared_memory: { enabled: true } } }")
-    asked = make_config(ZenohSettings(config_file=file))
-    assert asked.get_json("transport/shared_memory/enabled") == "true"
-    file.write_text("{ adminspace: { enabled: true } }")
-    other = make_config(ZenohSettings(config_file=file))
-    assert other.get_json("transport/shared_memory/enabled") == "false"
