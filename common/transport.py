@@ -27,6 +27,12 @@ from wallmap.common.link_settings import DEFAULT_PREFIX, TransportError, ZenohSe
 # 1 s and doubles to 4 s, which adds up to 4 s of loss after the router is back; a connect
 # attempt to a loopback or LAN router costs next to nothing.
 RECONNECT = "{period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2}"
+# Zenoh's shared-memory transport (on by default, for messages over 3 kB): a router and every
+# subscriber keep about 20 MB of each publishing session's segments after that session ends, so
+# a long-running router and detector grew with every bag played (460 and 580 MB after 20). A
+# session that comes and goes (the player) sends without it; the services that stay keep it (a
+# live robot's big clouds cross a busy machine without loss through it).
+SHARED_MEMORY = "transport/shared_memory/enabled"
 
 
 class StoppedWaiting(Exception):  # noqa: N818 - a stop asked for, not an error
@@ -62,11 +68,14 @@ def make_config(
     mode: str = "client",
     listen: tuple[str, ...] = (),
     join: tuple[str, ...] = (),
+    shared_memory: bool = True,
 ) -> zenoh.Config:
     """Build the Zenoh config: file first, then what the flags say.
 
     A router listens on ``listen`` and joins the routers at ``join`` (a mesh: a router reaches
-    another only through its own ``connect/endpoints``); it never connects to itself.
+    another only through its own ``connect/endpoints``); it never connects to itself. Without
+    ``shared_memory`` the session sends without Zenoh's shared memory, unless the file speaks of
+    it (``SHARED_MEMORY``).
     """
     if settings.config_file is not None:
         if not settings.config_file.is_file():
@@ -83,10 +92,13 @@ def make_config(
             conf.insert_json5("scouting/multicast/enabled", "false")
         if "retry" not in text:
             conf.insert_json5("connect/retry", RECONNECT)
+        shared_memory = shared_memory or "shared_memory" in text
     else:
         conf = zenoh.Config()
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("connect/retry", RECONNECT)
+    if not shared_memory:
+        conf.insert_json5(SHARED_MEMORY, "false")
     conf.insert_json5("mode", json.dumps(mode))
     if mode == "router":
         _insert_endpoints(conf, "listen", listen)
@@ -113,6 +125,7 @@ def open_session(
     join: tuple[str, ...] = (),
     count: Callable[[str], None] | None = None,
     stop: threading.Event | None = None,
+    shared_memory: bool = True,
 ) -> Iterator[zenoh.Session]:
     """A session for the ``with`` block, Zenoh's errors turned into one readable line.
 
@@ -122,7 +135,7 @@ def open_session(
     loss and recovery (``router_lost``, ``router_back``), for the service's counters. ``stop``
     (set by SIGINT or SIGTERM) ends a wait for the router with ``StoppedWaiting``.
     """
-    conf = make_config(settings, mode=mode, listen=listen, join=join)
+    conf = make_config(settings, mode=mode, listen=listen, join=join, shared_memory=shared_memory)
     where = ", ".join(listen if mode == "router" else settings.connect)
     try:
         session = zenoh.open(conf) if stop is None else _open_unless_stopped(conf, stop, where)

@@ -315,7 +315,8 @@ def run(
     with open_source(recording, player.source) as bag:
         _check_and_describe(bag, recording, player, log)
         loading = _band_loop_loading(bag, player)
-        with open_session(settings, stop=stop) as session:
+        # a player comes and goes: its frames would stay in the router's and services' memory
+        with open_session(settings, stop=stop, shared_memory=False) as session:
             acks = AckWindow(run_id)
             progress_sub = session.declare_subscriber(keys.progress, acks.on_sample)
             _wait_for_services(session, keys, player.services, player.wait_timeout, stop)

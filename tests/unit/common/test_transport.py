@@ -23,3 +23,16 @@ def test_config_file_first_flags_over_it_multicast_off_unless_asked(tmp_path):
     assert asked.get_json("scouting/multicast/enabled") == "true"
     waiting = make_config(ZenohSettings(wait_for_router=float("inf")))
     assert waiting.get_json("connect/timeout_ms") == "-1"
+
+
+def test_a_session_that_comes_and_goes_sends_without_shared_memory_unless_its_file_asks(tmp_path):
+    assert make_config(ZenohSettings()).get_json("transport/shared_memory/enabled") == "true"
+    passing = make_config(ZenohSettings(), shared_memory=False)
+    assert passing.get_json("transport/shared_memory/enabled") == "false"
+    file = tmp_path / "z.json5"
+    file.write_text("{ transport: { shared_memory: { enabled: true } } }")
+    asked = make_config(ZenohSettings(config_file=file), shared_memory=False)
+    assert asked.get_json("transport/shared_memory/enabled") == "true"
+    file.write_text("{ adminspace: { enabled: true } }")
+    other = make_config(ZenohSettings(config_file=file), shared_memory=False)
+    assert other.get_json("transport/shared_memory/enabled") == "false"
