@@ -5,17 +5,24 @@ base frame). The straightforward implementation runs the paper's scheme with sci
 RANSACRegressor: split at NaN, then per cluster fit a line, drop its inliers, repeat. Both see the
 same rows in the same run; medians per frame.
 
-    .venv/bin/python benchmarks/detector_speed.py [--frames 40]   (needs scikit-learn: make bench)
+    .venv/bin/python benchmarks/detector_speed.py [--frames 40]
+
+scikit-learn is read from .venv/bench-only, where `make bench` installs it, after the venv's own
+packages: not in the venv, where numba would import its scipy at every service's start.
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
-from sklearn.linear_model import RANSACRegressor
+
+sys.path.append(str(Path(__file__).resolve().parents[1] / ".venv" / "bench-only"))
+from sklearn.linear_model import RANSACRegressor  # the folder above: after the imports
 
 from wallmap.common.ransac import RansacConfig, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
