@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
+from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
@@ -75,17 +76,42 @@ def plain(array: Any, dtype: DTypeLike) -> NDArray[Any]:
     return np.array(array, dtype=dtype, order="C")
 
 
-def compile_detector() -> float:
-    """Make the detector's loops ready (compiled, or loaded from numba's cache); the seconds.
+@dataclass(frozen=True)
+class Readied:
+    """Loops made ready: the seconds it took, and how many numba compiled (not in its cache).
+
+    Only a compile is worth a line in a service's log: loading from the cache on a busy
+    machine can take as long, and a line saying "compiled" then would send a user looking for
+    a cache that does not work.
+    """
+
+    seconds: float
+    compiled: int
+
+
+def make_ready(*modules: ModuleType) -> Readied:
+    """Run each module's ``warm_up``; what it took."""
+    start = time.perf_counter()
+    for module in modules:
+        module.warm_up()
+    seconds = time.perf_counter() - start
+    compiled = sum(
+        len(loop.stats.cache_misses)
+        for module in modules
+        for loop in vars(module).values()
+        if hasattr(loop, "signatures")  # numba's dispatchers
+    )
+    return Readied(seconds, compiled)
+
+
+def compile_detector() -> Readied:
+    """Make the detector's loops ready (compiled, or loaded from numba's cache).
 
     numba compiles them on a machine's first run (about 10 s on two cores) and caches them;
     afterwards they load in a fraction of a second. Done at a detector's start, so that the
     first frame does not wait; not the rooms' loops, which a detector never runs.
     """
-    start = time.perf_counter()
-    line_kernels().warm_up()
-    band_kernels().warm_up()
-    return time.perf_counter() - start
+    return make_ready(line_kernels(), band_kernels())
 
 
 def loaded_band_kernels() -> ModuleType | None:
@@ -103,17 +129,14 @@ def load_band_stack_meanwhile() -> threading.Thread:
     return loading
 
 
-def compile_mapper() -> float:
-    """Make the loops of the mapper's frame path ready (the pose judge's, the map's); the seconds.
+def compile_mapper() -> Readied:
+    """Make the loops of the mapper's frame path ready (the pose judge's, the map's).
 
     Not the rooms': rooms are segmented off the frame path, on a worker of their own, which
     loads them at its first segmentation (a tenth of a second, once) rather than the mapper's
     start.
     """
-    start = time.perf_counter()
-    pose_kernels().warm_up()
-    map_kernels().warm_up()
-    return time.perf_counter() - start
+    return make_ready(pose_kernels(), map_kernels())
 
 
 def compile_all() -> float:

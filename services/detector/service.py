@@ -49,9 +49,10 @@ def run(
     keys = Keys(settings.prefix)
     stats = Stats(log)
     detector = WallDetector(config)
-    took = compile_detector()
-    if took > 1.0:
-        log.info("compiled the line search in %.1f s (once; cached for later starts)", took)
+    if (readied := compile_detector()).compiled:
+        log.info(
+            "compiled the line search in %.1f s (once; cached for later starts)", readied.seconds
+        )
     log.info("connecting to %s (prefix %r)", ", ".join(settings.connect), settings.prefix)
     with open_session(settings, count=stats.add, stop=stop) as session:
         publisher = declare_history_publisher(session, keys.observations, history.samples())

@@ -52,8 +52,11 @@ def _load_ahead(log: logging.Logger, ros2: bool) -> None:
     frames and slowed them. The rooms' loops load with the rooms' first segmentation, off the
     frame path (``compiled.compile_mapper``).
     """
-    if (took := compiled.compile_mapper()) > 1.0:
-        log.info("compiled the mapper's loops in %.1f s (once; cached for later starts)", took)
+    if (readied := compiled.compile_mapper()).compiled:
+        log.info(
+            "compiled the mapper's loops in %.1f s (once; cached for later starts)",
+            readied.seconds,
+        )
     if ros2:
         ros2_out.warm_up()
 

@@ -1,5 +1,6 @@
 """The compiled loops: compiled once, for the arrays every frame brings; numba loaded lazily."""
 
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -116,3 +117,43 @@ def test_a_pose_in_whole_numbers_runs_the_map_s_loops_compiled_at_install() -> N
         assert wall_map.integrate(frame, Pose(float(seq), 0, 0, 0)) == [0]
     after = {name: list(k.signatures) for name, k in kernels().items()}
     assert after == before
+
+
+LOOP = """
+from numba import njit
+
+
+@njit(cache=True)
+def twice(x):
+    return 2 * x
+
+
+def warm_up():
+    twice(1.0)
+"""
+
+READY = """
+import importlib, sys
+sys.path.insert(0, sys.argv[1])
+from wallmap.common.compiled import make_ready
+print(make_ready(importlib.import_module("tiny_loop")).compiled)
+"""
+
+
+def test_a_loop_is_said_compiled_once_then_loaded_from_the_cache(tmp_path: Path) -> None:
+    """The services say "compiled" only when numba compiled: a slow load from its cache on a
+    busy machine is not a compile, and saying so on every start sends users looking for a
+    broken cache."""
+    (tmp_path / "tiny_loop.py").write_text(LOOP)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", READY, str(tmp_path)],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        ).stdout.strip()
+        for _ in range(2)
+    ]
+    assert runs == ["1", "0"]
