@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import Stack
 
 from wallmap.scene import Camera, write_scene_bag
 
@@ -27,7 +28,7 @@ def _rss_mb(pid: int) -> float:
 
 
 def test_players_that_come_and_go_leave_the_router_and_detector_as_they_were(
-    stack, tmp_path
+    stack: Stack, tmp_path: Path
 ) -> None:
     bag = tmp_path / "d.bag"
     write_scene_bag(bag, seed=4, n_frames=60, fmt="ros1", sensor="depth16", camera=Camera(320, 240))
