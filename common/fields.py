@@ -140,17 +140,25 @@ def point(value: Any, name: str) -> Point:
     return pair
 
 
+def plain_matrix2(value: Any) -> tuple[Point, Point] | None:
+    """Two rows of two finite numbers (not booleans) as floats, or None: the caller words it."""
+    if isinstance(value, list | tuple) and len(value) == 2:
+        first, second = _pair(value[0]), _pair(value[1])
+        if first is not None and second is not None:
+            return first, second
+    return None
+
+
 def matrix2(value: Any, name: str) -> tuple[Point, Point]:
     """A 2x2 matrix of finite numbers as two rows, in plain Python; worded as :func:`array`.
 
     For a wall's covariance, on every wall of a map reply, where numpy's cost per call would be
     most of the check.
     """
-    if isinstance(value, list | tuple) and len(value) == 2:
-        first, second = _pair(value[0]), _pair(value[1])
-        if first is not None and second is not None:
-            return first, second
-    raise refusal(name, "finite numbers of shape (2, 2)", value)
+    rows = plain_matrix2(value)
+    if rows is None:
+        raise refusal(name, "finite numbers of shape (2, 2)", value)
+    return rows
 
 
 def array(value: Any, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from wallmap.common import codec
 from wallmap.common.codec import MessageError
+from wallmap.common.fields import array, refusal
 from wallmap.common.line_fit import fit_line
 from wallmap.common.map_records import WallRecord
 from wallmap.common.messages import (
@@ -19,6 +20,7 @@ from wallmap.common.messages import (
     Observations,
     Pose,
     WallObservation,
+    _covariance,
     pack,
     unpack_frame,
     unpack_observations,
@@ -135,6 +137,68 @@ def test_a_wall_s_covariance_is_a_covariance(cov: list[list[float]], reason: str
     else:
         with pytest.raises(MessageError, match=reason):
             WallObservation.from_map(m)
+
+
+def _numpy_wall_covariance(value: object) -> np.ndarray:
+    """The check a wall's covariance had before its plain-float one: numpy's parse and tests."""
+    cov = array(value, (2, 2), "cov")
+    size = np.abs(cov)
+    if not (np.abs(cov - cov.T) <= 1e-12 + 1e-9 * size.max() + 1e-5 * size).all():
+        raise refusal("cov", "symmetric", value)
+    (a, _), (c, d) = cov.tolist()
+    if 0.5 * (a + d) - math.hypot(0.5 * (a - d), c) < -1e-12:
+        raise refusal("cov", "positive semi-definite", value)
+    return cov
+
+
+_ENTRY = st.one_of(
+    st.floats(-1e-3, 1e-3),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(-3, 3),
+    st.booleans(),
+    st.just("1e-4"),  # numpy's parse reads strings of numbers: still taken, as before
+    st.just(np.float32(1e-4)),
+)
+
+
+@st.composite
+def _wall_covariances(draw: st.DrawFn) -> object:
+    """Near-symmetric matrices at the tolerance's edge, and every kind of entry a sender sends."""
+    a, b, d = (draw(st.floats(-1e-3, 1e-3)) for _ in range(3))
+    c = b * (1 + draw(st.sampled_from([0.0, 1e-7, 1e-5, 2e-5, -1e-5, 1e-3])))
+    rows = [[a, b], [c, d]]
+    for i, j in draw(st.lists(st.tuples(st.integers(0, 1), st.integers(0, 1)), max_size=2)):
+        rows[i][j] = draw(_ENTRY)
+    shape = draw(st.sampled_from(["lists", "tuples", "array", "ragged"]))
+    if shape == "tuples":
+        return tuple(tuple(row) for row in rows)
+    if shape == "array":
+        with contextlib.suppress(ValueError, TypeError):
+            return np.array(rows, dtype=np.float64)
+    if shape == "ragged":
+        return [rows[0], rows[1][:1]]
+    return rows
+
+
+@settings(max_examples=600, deadline=None)
+@given(_wall_covariances())
+def test_a_wall_s_covariance_takes_and_refuses_what_numpy_s_check_did(value: object) -> None:
+    """The plain-float check of a wall's covariance, against the numpy one it replaced: the same
+    matrices taken, with the same values, and the same refused, for the same reason."""
+    try:
+        expected: np.ndarray | str = _numpy_wall_covariance(value)
+    except MessageError as err:
+        expected = str(err)
+    try:
+        got: np.ndarray | str = _covariance(value, 2, "cov")
+    except MessageError as err:
+        got = str(err)
+    if isinstance(expected, str):
+        assert got == expected
+    else:
+        assert isinstance(got, np.ndarray)
+        assert got.dtype == expected.dtype
+        np.testing.assert_array_equal(got, expected)
 
 
 def test_bad_frames_are_refused_with_their_reason():
