@@ -41,8 +41,6 @@ Array = NDArray[np.float64]
 
 def _covariance(value: Any, n: int, key: str) -> Array:
     """A covariance: symmetric (to rounding) and positive semi-definite."""
-    if n == 2:
-        return _wall_covariance(value, key)
     cov = array(value, (n, n), key)
     size = np.abs(cov)
     # np.allclose(cov, cov.T, atol=1e-12 + 1e-9 * max |cov|) without its cost (a tenth of a
@@ -55,12 +53,13 @@ def _covariance(value: Any, n: int, key: str) -> Array:
 
 
 def _wall_covariance(value: Any, key: str) -> Array:
-    """A wall's 2x2 covariance, checked as ``_covariance`` checks any, on plain floats.
+    """A wall's 2x2 covariance, checked as ``_covariance`` checks any, and non-singular.
 
-    Every wall of every frame brings one: numpy's parse and checks were a fifth of decoding a
-    frame's observations. Two rows of two floats (what every sender writes) are read as they
-    are; anything else goes through numpy's parse (``array``), as before. The same tests on
-    the same float64 values, in the same order of operations: the same matrices pass.
+    On plain floats, since every wall of every frame brings one: numpy's parse and checks were
+    a third of decoding a frame's observations. Two rows of two floats (what every sender
+    writes) are read as they are; anything else goes through numpy's parse (``array``), as
+    before. The same tests on the same float64 values, in the same order of operations: the
+    same matrices pass.
     """
     rows = plain_matrix2(value) or array(value, (2, 2), key).tolist()
     (a, b), (c, d) = rows
@@ -71,6 +70,8 @@ def _wall_covariance(value: Any, key: str) -> Array:
     # the smaller eigenvalue in closed form, eigvalsh's cost spared
     if 0.5 * (a + d) - math.hypot(0.5 * (a - d), c) < -1e-12:
         raise refusal(key, "positive semi-definite", value)
+    if a * d - b * c <= 0.0:
+        raise refusal(key, "non-singular", value)
     return np.array([[a, b], [c, d]])
 
 
@@ -324,10 +325,7 @@ class WallObservation:
         if math.hypot(u, v) < 1e-3:
             msg = "wall passes through the sensor (u = v = 0)"
             raise MessageError(msg)
-        cov = _covariance(required(m, "cov"), 2, "cov")
-        (a, b), (c, d) = cov.tolist()
-        if a * d - b * c <= 0.0:
-            raise refusal("cov", "non-singular", m["cov"])
+        cov = _wall_covariance(required(m, "cov"), "cov")
         p0, p1 = point(required(m, "p0"), "p0"), point(required(m, "p1"), "p1")
         check_coordinates((*p0, *p1), "a segment end (p0, p1)")
         return cls(

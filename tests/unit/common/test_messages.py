@@ -20,7 +20,7 @@ from wallmap.common.messages import (
     Observations,
     Pose,
     WallObservation,
-    _covariance,
+    _wall_covariance,
     pack,
     unpack_frame,
     unpack_observations,
@@ -140,7 +140,8 @@ def test_a_wall_s_covariance_is_a_covariance(cov: list[list[float]], reason: str
 
 
 def _numpy_wall_covariance(value: object) -> np.ndarray:
-    """The check a wall's covariance had before its plain-float one: numpy's parse and tests."""
+    """The checks a wall's covariance had before its plain-float ones: numpy's parse and tests,
+    then ``WallObservation.from_map``'s own test of the determinant."""
     cov = array(value, (2, 2), "cov")
     size = np.abs(cov)
     if not (np.abs(cov - cov.T) <= 1e-12 + 1e-9 * size.max() + 1e-5 * size).all():
@@ -148,6 +149,9 @@ def _numpy_wall_covariance(value: object) -> np.ndarray:
     (a, _), (c, d) = cov.tolist()
     if 0.5 * (a + d) - math.hypot(0.5 * (a - d), c) < -1e-12:
         raise refusal("cov", "positive semi-definite", value)
+    (a, b), (c, d) = cov.tolist()
+    if a * d - b * c <= 0.0:
+        raise refusal("cov", "non-singular", value)
     return cov
 
 
@@ -190,7 +194,7 @@ def test_a_wall_s_covariance_takes_and_refuses_what_numpy_s_check_did(value: obj
     except MessageError as err:
         expected = str(err)
     try:
-        got: np.ndarray | str = _covariance(value, 2, "cov")
+        got: np.ndarray | str = _wall_covariance(value, "cov")
     except MessageError as err:
         got = str(err)
     if isinstance(expected, str):
