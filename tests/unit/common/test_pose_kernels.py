@@ -188,8 +188,20 @@ def test_interpolation_on_an_even_grid_is_numpy_s_to_the_bit() -> None:
     values = np.cumsum(np.random.default_rng(2).normal(0, 0.01, len(grid)))
     xs = np.concatenate([np.random.default_rng(3).uniform(9.0, 26.0, 2000), grid, [grid[-1]]])
     want = np.interp(xs, grid, values)
-    got = [pose_kernels._interp(x, grid, values, grid[1] - grid[0]) for x in xs]
-    assert np.array_equal(got, want)
+    for per_step in (1 / (grid[1] - grid[0]), 0.9 / (grid[1] - grid[0]), 0.0):  # or a bad guess
+        got = [pose_kernels._interp(x, grid, values, per_step) for x in xs]
+        assert np.array_equal(got, want)
+
+
+def test_the_least_median_is_numpy_s_to_the_bit() -> None:
+    """Rows of few distinct values (ties at the middle), even and odd, ordered every way."""
+    rng = np.random.default_rng(8)
+    for _ in range(300):
+        rows, width = int(rng.integers(1, 12)), int(rng.integers(1, 9))
+        r = rng.integers(0, 4, (rows, width)) + rng.choice([0.0, 0.5], (rows, width))
+        if rng.random() < 0.5:
+            r = r[np.argsort(-np.median(r, axis=1))]  # each row's median lower than the last
+        assert pose_kernels.least_median(r) == np.median(r, axis=1).min()
 
 
 def _numpy_turn_costs(
@@ -203,15 +215,19 @@ def _numpy_turn_costs(
     return (0.5 * np.minimum(r, 3.0) ** 2).sum(axis=1)
 
 
-def test_the_latency_costs_are_numpy_s() -> None:
-    """Turns of a source 40 ms late, with outliers: the same costs, the same best latency."""
+@pytest.mark.parametrize("turns", [300, 301])
+def test_the_latency_costs_are_numpy_s(turns: int) -> None:
+    """Turns of a source 40 ms late, with outliers: the same costs, the same best latency.
+
+    An even and an odd number of turns: the medians left out must be none the smallest.
+    """
     rng = np.random.default_rng(6)
     grid = np.arange(0.0, 30.0, 0.01)
     heading = np.cumsum(rng.normal(0, 0.004, len(grid)))
-    t0 = np.sort(rng.uniform(1.0, 28.0, 300))
+    t0 = np.sort(rng.uniform(1.0, 28.0, turns))
     t1 = t0 + 0.25
     seen = np.interp(t1 + 0.04, grid, heading) - np.interp(t0 + 0.04, grid, heading)
-    seen = seen + rng.normal(0, 0.002, 300)
+    seen = seen + rng.normal(0, 0.002, turns)
     seen[::17] += 0.3  # mismatched lines
     shifts = np.arange(-0.25, 0.2525, 0.005)
     got = pose_kernels.turn_costs(t0, t1, seen, shifts, grid, heading, 3e-4, 3.0)
