@@ -83,6 +83,7 @@ class PoseBuffer:
         self.config = config or PoseBufferConfig()
         self._stamps: list[float] = []
         self._poses: list[Pose] = []
+        self._yaws: list[float] = []  # the poses' headings, for ``headings`` to read at once
 
     def __len__(self) -> int:
         return len(self._poses)
@@ -96,18 +97,22 @@ class PoseBuffer:
             )
             self._stamps.clear()
             self._poses.clear()
+            self._yaws.clear()
         i = bisect.bisect_left(self._stamps, pose.stamp)
         if i == len(self._stamps) and self._poses:
             self._warn_jump(self._poses[-1], pose)
         if i < len(self._stamps) and self._stamps[i] == pose.stamp:
             self._poses[i] = pose
+            self._yaws[i] = pose.yaw
         else:
             self._stamps.insert(i, pose.stamp)
             self._poses.insert(i, pose)
+            self._yaws.insert(i, pose.yaw)
         cut = bisect.bisect_left(self._stamps, self._stamps[-1] - self.config.max_age)
         if cut:
             del self._stamps[:cut]
             del self._poses[:cut]
+            del self._yaws[:cut]
 
     def _warn_jump(self, last: Pose, pose: Pose) -> None:
         distance = math.hypot(pose.x - last.x, pose.y - last.y)
@@ -180,6 +185,4 @@ class PoseBuffer:
         """
         low = max(bisect.bisect_left(self._stamps, start) - 1, 0)
         high = bisect.bisect_right(self._stamps, end)
-        poses = self._poses[low:high]
-        stamps = np.array([p.stamp for p in poses])
-        return stamps, np.unwrap(np.array([p.yaw for p in poses]))
+        return np.array(self._stamps[low:high]), np.unwrap(np.array(self._yaws[low:high]))

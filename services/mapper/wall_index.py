@@ -26,11 +26,20 @@ class WallIndex:
         self._cells: defaultdict[tuple[int, int], set[int]] = defaultdict(set)
         self._filed: dict[int, list[tuple[int, int]]] = {}
 
+    def _bounds(self, segment: Array, margin: float) -> tuple[int, int, int, int]:
+        """The first and last cell columns and rows of the segment's box grown by ``margin``."""
+        (ax, ay), (bx, by) = segment.tolist()
+        cell = self.cell
+        return (
+            math.floor((min(ax, bx) - margin) / cell),
+            math.floor((max(ax, bx) + margin) / cell),
+            math.floor((min(ay, by) - margin) / cell),
+            math.floor((max(ay, by) + margin) / cell),
+        )
+
     def _cover(self, segment: Array, margin: float) -> list[tuple[int, int]]:
         """Cells of the segment's bounding box grown by ``margin``."""
-        (ax, ay), (bx, by) = segment.tolist()
-        x0, x1 = (math.floor(v / self.cell) for v in (min(ax, bx) - margin, max(ax, bx) + margin))
-        y0, y1 = (math.floor(v / self.cell) for v in (min(ay, by) - margin, max(ay, by) + margin))
+        x0, x1, y0, y1 = self._bounds(segment, margin)
         return [(i, j) for i in range(x0, x1 + 1) for j in range(y0, y1 + 1)]
 
     def file(self, wall_id: int, ends: Array) -> None:
@@ -53,9 +62,13 @@ class WallIndex:
 
     def near(self, segment: Array) -> set[int]:
         """Ids of every wall whose grown extent may come within ``margin`` of ``segment``."""
-        found: set[int] = set()
-        for cell in self._cover(segment, 0.0):
-            found |= self._cells.get(cell, set())
+        x0, x1, y0, y1 = self._bounds(segment, 0.0)
+        cells, found = self._cells, set[int]()
+        for i in range(x0, x1 + 1):
+            for j in range(y0, y1 + 1):
+                ids = cells.get((i, j))
+                if ids:
+                    found |= ids
         return found
 
     def __len__(self) -> int:
