@@ -4,7 +4,9 @@ A generated scene's 320x240 16UC1 depth bag (the issue-26 bag) goes through the 
 (the services' code in one process, ``wallmap.offline``), with tf poses judged by the walls as
 the mapper does by default. Each part is timed where the mapper calls it, with ``perf_counter``
 around the method; the table gives the median per frame and the mean (the latency estimate runs
-every tenth turn, so its median is nearly nothing and its mean is what it costs).
+every tenth turn, so its median is nearly nothing and its mean is what it costs). The mapper's
+compiled loops are loaded first, as the service loads them before it says it is ready: else
+the first frames would time numba reading its cache.
 
     .venv/bin/python benchmarks/mapper_stages.py [--frames 784]
 """
@@ -22,6 +24,7 @@ from typing import Any
 
 from floor_ratio import write_depth_bag
 
+from wallmap.common import compiled
 from wallmap.offline import run_bag
 from wallmap.services.mapper.mapping import Mapping
 from wallmap.services.mapper.pose_judge import PoseJudge
@@ -52,6 +55,7 @@ def _timed(spent: dict[str, float], name: str, method: Callable[..., Any]) -> Ca
 
 def measure(bag: Path) -> dict[str, list[float]]:
     """Each part's seconds, per frame the mapper integrated."""
+    compiled.compile_mapper()
     spent: dict[str, float] = defaultdict(float)
     per_frame: dict[str, list[float]] = defaultdict(list)
     originals = [(cls, method, getattr(cls, method)) for _, cls, method in PARTS]
