@@ -47,11 +47,9 @@ class Extent:
 
     def add(self, segment: Array) -> None:
         """Count the bins covered by an observed segment (2 x 2 map points)."""
-        t = self.along(segment)
-        lo, hi = (
-            math.floor(t.min() / BIN),
-            max(math.ceil(t.max() / BIN) - 1, math.floor(t.min() / BIN)),
-        )
+        first, last = self.along(segment).tolist()  # two positions: min and max in floats
+        low, high = min(first, last), max(first, last)
+        lo, hi = math.floor(low / BIN), max(math.ceil(high / BIN) - 1, math.floor(low / BIN))
         self._cover(lo, hi)
         self.counts[lo - self.first : hi - self.first + 1] += 1
         self.revision += 1

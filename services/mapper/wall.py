@@ -89,7 +89,9 @@ class Wall:
     def extend(self, points: Array) -> None:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
         self.span = self.span_of(self.ends.tolist() + points.tolist())
-        self.ends = self.on_line(np.array(self.span))
+        fx, fy, dx, dy, _, _ = self.frame
+        (low, high) = self.span  # on_line's sums, in floats: the same numbers
+        self.ends = np.array([[fx + low * dx, fy + low * dy], [fx + high * dx, fy + high * dy]])
 
     def segments(self) -> Array:
         """The served segments (k x 2 x 2), from the extent counts, on the current line.

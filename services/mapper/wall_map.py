@@ -259,7 +259,9 @@ class WallMap:
     def _merge_duplicates(self, wall: Wall, stamp: float) -> Wall:
         """Merge walls on ``wall``'s line: sharing its extent, or across a gap (_continues)."""
         gap = self.config.merge_gap
-        reach = wall.ends + np.array([-1.0, 1.0])[:, None] * gap * wall.direction
+        (ax, ay), (bx, by) = wall.ends.tolist()
+        _, _, dx, dy, _, _ = wall.frame
+        reach = np.array([[ax - gap * dx, ay - gap * dy], [bx + gap * dx, by + gap * dy]])
         for other in self._near(reach, max_gap=0.0):
             if other.id not in self.walls or other is wall or wall.id not in self.walls:
                 continue
@@ -343,8 +345,8 @@ class WallMap:
         na, nb = a.normal, b.normal
         if np.arccos(min(abs(float(na @ nb)), 1.0)) > self.config.merge_angle:
             return False
-        ta, tb = a.along(a.ends), a.along(b.ends)
-        middle = 0.5 * (max(ta.min(), tb.min()) + min(ta.max(), tb.max()))
+        (a0, a1), (b0, b1) = a.along(a.ends).tolist(), a.along(b.ends).tolist()
+        middle = 0.5 * (max(min(a0, a1), min(b0, b1)) + min(max(a0, a1), max(b0, b1)))
         point = a.on_line(np.array([middle]))[0]
         offset = abs(float(nb @ (point - b.foot)))
         return offset <= self.config.merge_offset
