@@ -90,7 +90,7 @@ class Wall:
         """Grow ``ends`` to cover ``points`` (their projections onto the current line)."""
         self.span = self.span_of(self.ends.tolist() + points.tolist())
         fx, fy, dx, dy, _, _ = self.frame
-        (low, high) = self.span  # on_line's sums, in floats: the same numbers
+        low, high = self.span  # on_line's sums, in floats: the same numbers
         self.ends = np.array([[fx + low * dx, fy + low * dy], [fx + high * dx, fy + high * dy]])
 
     def segments(self) -> Array:

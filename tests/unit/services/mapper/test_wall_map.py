@@ -10,7 +10,7 @@ from wallmap.common.map_query import MapQuery
 from wallmap.common.messages import Observations, Pose, WallObservation
 from wallmap.services.mapper import serving, state_file
 from wallmap.services.mapper.map_config import MapperConfig
-from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, SourcePose
+from wallmap.services.mapper.pose_buffer import Lookup, PoseBuffer, PoseBufferConfig, SourcePose
 from wallmap.services.mapper.wall_map import WallMap
 
 # A non-Manhattan room of five walls with a doorway, and a free-standing wall through the origin.
@@ -272,6 +272,24 @@ def test_two_faces_of_a_real_wall_stay_apart():
     )
     assert len(wall_map.walls) == 2
     assert wall_map.merges == []
+
+
+def test_pose_buffer_headings_follow_every_insert_replace_trim_and_restart():
+    """The headings a latency estimate reads are the poses' own, whatever the buffer did."""
+    buf = PoseBuffer(PoseBufferConfig(max_age=5.0))
+    rng = np.random.default_rng(3)
+    stamps = np.arange(0.0, 12.0, 0.25).reshape(-1, 2)[:, ::-1].ravel()  # pairs swapped
+    for stamp in stamps:  # each pair's second out of order: inserted in place
+        buf.add(Pose(float(stamp), 0.0, 0.0, float(rng.uniform(-np.pi, np.pi))))
+    buf.add(Pose(10.0, 0.0, 0.0, 0.5))  # a stamp again: replaced
+    kept = [buf.lookup(t) for t in np.arange(6.75, 12.0, 0.25)]  # older than 5 s: trimmed
+    stamps, yaw = buf.headings(8.0, 11.0)
+    want = [p for p in kept if 7.75 <= p.stamp <= 11.0]  # one before the start
+    assert stamps.tolist() == [p.stamp for p in want]
+    assert yaw.tolist() == np.unwrap([p.yaw for p in want]).tolist()
+    assert [p.yaw for p in want if p.stamp == 10.0] == [0.5]  # the replaced one among them
+    buf.add(Pose(-100.0, 0.0, 0.0, 0.25))  # time jumped back: a new run
+    assert buf.headings(-101.0, 0.0)[1].tolist() == [0.25]
 
 
 def test_pose_jumps_are_logged(caplog):
