@@ -50,6 +50,25 @@ class LineFit:
     angle_sd: float
     noise_ratio: float
 
+    @classmethod
+    def from_values(cls, values: list[float]) -> LineFit:
+        """The fit from ``line_kernels.fit_values``' numbers (its ``FIT_FIELDS``, in order)."""
+        nx, ny, offset, cx, cy, c00, c01, c11, p0x, p0y, p1x, p1y, n, rms, sd, ratio = values
+        normal = np.array([nx, ny])
+        return cls(
+            normal=normal,
+            offset=offset,
+            centroid=np.array([cx, cy]),
+            closest=offset * normal,
+            cov=np.array([[c00, c01], [c01, c11]]),
+            p0=np.array([p0x, p0y]),
+            p1=np.array([p1x, p1y]),
+            n_points=int(n),
+            rms=rms,
+            angle_sd=sd,
+            noise_ratio=ratio,
+        )
+
     @property
     def length(self) -> float:
         """Length of the fitted segment."""
@@ -67,47 +86,10 @@ def fit_line(points: Array, sigmas: Array | None = None, *, cov_scale: float = 1
         cov_scale: factor on the covariance, for noise that is correlated along a scan (a depth
             camera's errors are), which the independent-points formula underestimates.
     """
-    n = len(points)
     points = plain(points, np.float64)
-    weights = np.ones(n) if sigmas is None else plain(1.0 / (sigmas * sigmas), np.float64)
-    nx, ny, offset, cx, cy, total = line_kernels().weighted_line(points, weights)
-    # Positions t along the line and residuals r across it, summed in one pass.
-    wtt, wrr, rr, t_min, t_max = line_kernels().line_spread(points, weights, nx, ny, cx, cy)
-    chi2_per_dof = wrr / max(n - 2, 1)
-    scale2 = chi2_per_dof if sigmas is None else max(chi2_per_dof, 1.0)
-    var_angle = scale2 / max(wtt, 1e-12)
-    var_offset = scale2 / total
-    # Rotating the normal by d_angle about the centroid moves (u, v) along `jac_angle`.
-    c_along = cy * nx - cx * ny
-    jx, jy = nx * c_along - offset * ny, ny * c_along + offset * nx
-    cov = np.array(
-        [
-            [
-                var_angle * jx * jx + var_offset * nx * nx,
-                var_angle * jx * jy + var_offset * nx * ny,
-            ],
-            [
-                var_angle * jx * jy + var_offset * nx * ny,
-                var_angle * jy * jy + var_offset * ny * ny,
-            ],
-        ]
-    )
-    normal = np.array([nx, ny])
-    centroid = np.array([cx, cy])
-    along = np.array([-ny, nx])
-    return LineFit(
-        normal=normal,
-        offset=offset,
-        centroid=centroid,
-        closest=offset * normal,
-        cov=cov_scale * cov,
-        p0=centroid + t_min * along,
-        p1=centroid + t_max * along,
-        n_points=n,
-        rms=math.sqrt(rr / n),
-        angle_sd=math.sqrt(cov_scale * var_angle),
-        noise_ratio=math.nan if sigmas is None else math.sqrt(chi2_per_dof),
-    )
+    weights = np.ones(len(points)) if sigmas is None else plain(1.0 / (sigmas * sigmas), np.float64)
+    values = line_kernels().fit_values(points, weights, sigmas is None, cov_scale)
+    return LineFit.from_values(values.tolist())
 
 
 def bend_split(points: Array, sigmas: Array, min_points: int, f_threshold: float) -> int | None:

@@ -1,10 +1,12 @@
-"""The line search's inner loops, compiled (numba): one pass over a cluster's points each.
+"""The line search, compiled (numba): a row's sequential RANSAC in one call.
 
 A 320-point scan row gives about one line, and the same search in numpy is a few hundred small
 array calls a frame, each a few microseconds of overhead for a few hundred points of work: most
-of a depth frame's detector time. Here each step of it is one loop over the points. The
-arithmetic is the numpy version's, term for term (``line_fit`` and ``ransac`` keep the maths'
-explanations); sums are taken in another order, so results agree to rounding, not to the bit.
+of a depth frame's detector time. Here each step of it is one loop over the points, and the
+rounds of the search (``sequential_lines``) and the row's clusters (``row_lines``) run in one
+call: numba draws from numpy's random generator as numpy does. The arithmetic is the numpy
+statements', term for term (``line_fit`` and ``ransac`` keep the maths' explanations); sums are
+taken in another order, so they agree to rounding, not to the bit.
 
 Compiled once per machine and cached beside this file (or in the user's cache where that is
 not writable); ``warm_up`` compiles or loads them before the first frame needs them.
@@ -65,6 +67,61 @@ def line_spread(
         t_min = min(t_min, t)
         t_max = max(t_max, t)
     return wtt, wrr, rr, t_min, t_max
+
+
+# What ``fit_values`` gives, in order (``line_fit.LineFit.from_values`` reads them so).
+FIT_FIELDS = (
+    "nx", "ny", "offset", "cx", "cy", "c00", "c01", "c11",
+    "p0x", "p0y", "p1x", "p1y", "n_points", "rms", "angle_sd", "noise_ratio",
+)  # fmt: skip
+_FIT_SIZE = len(FIT_FIELDS)  # numba reads module integers as constants; not tuples of names
+_P0X, _P0Y, _P1X, _P1Y, _ANGLE_SD = (
+    FIT_FIELDS.index(f) for f in ("p0x", "p0y", "p1x", "p1y", "angle_sd")
+)
+# Why ``sequential_lines`` turned a candidate down, by index into its counts.
+REJECTIONS = (
+    "no line with min_points inliers",
+    "piece below min_points (cut at a gap or kink)",
+    "shorter than min_length",
+    "direction less sure than max_angle_sd",
+)
+_REJECTION_COUNT = len(REJECTIONS)
+
+
+@njit(cache=True, nogil=True)
+def _larger(a: float, b: float) -> float:
+    """Python's ``max(a, b)``, NaN and all: ``b`` only when it is larger."""
+    return b if b > a else a
+
+
+@njit(cache=True, nogil=True)
+def fit_values(points: Array, weights: Array, estimated: bool, cov_scale: float) -> Array:
+    """``line_fit.fit_line``'s numbers (``FIT_FIELDS``); ``estimated``: no per-point noise given.
+
+    ``line_fit`` explains the covariance; this is its arithmetic, term for term, so that a
+    line fitted here and one fitted there are the same to the bit.
+    """
+    n = points.shape[0]
+    nx, ny, offset, cx, cy, total = weighted_line(points, weights)
+    wtt, wrr, rr, t_min, t_max = line_spread(points, weights, nx, ny, cx, cy)
+    chi2_per_dof = wrr / max(n - 2, 1)
+    scale2 = chi2_per_dof if estimated else _larger(chi2_per_dof, 1.0)
+    var_angle = scale2 / _larger(wtt, 1e-12)
+    var_offset = scale2 / total
+    # Rotating the normal by d_angle about the centroid moves (u, v) along (jx, jy).
+    c_along = cy * nx - cx * ny
+    jx, jy = nx * c_along - offset * ny, ny * c_along + offset * nx
+    out = np.empty(_FIT_SIZE)
+    out[0], out[1], out[2], out[3], out[4] = nx, ny, offset, cx, cy
+    out[5] = cov_scale * (var_angle * jx * jx + var_offset * nx * nx)
+    out[6] = cov_scale * (var_angle * jx * jy + var_offset * nx * ny)
+    out[7] = cov_scale * (var_angle * jy * jy + var_offset * ny * ny)
+    out[8], out[9] = cx + t_min * -ny, cy + t_min * nx
+    out[10], out[11] = cx + t_max * -ny, cy + t_max * nx
+    out[12], out[13] = n, math.sqrt(rr / n)
+    out[14] = math.sqrt(cov_scale * var_angle)
+    out[15] = math.nan if estimated else math.sqrt(chi2_per_dof)
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -223,6 +280,136 @@ def segment_ranges(
 
 
 @njit(cache=True, nogil=True)
+def sequential_lines(
+    points: Array,
+    sigmas: Array,
+    band: Array,
+    rng: np.random.Generator,
+    counts: tuple[int, int, int, int],
+    limits: tuple[float, float, float, float, float, float, float, float],
+) -> tuple[Array, NDArray[np.int64], Indices, Indices]:
+    """``ransac.find_lines``' search, one line after another, in one call.
+
+    ``counts``: iterations, min_points, max_lines and the points a hypothesis is scored on;
+    ``limits``: max_gap, split_f, cov_scale, min_length, max_angle_sd, lone_share, lone_length
+    and lone_angle_sd (``ransac.RansacConfig`` says what each is). ``rng`` draws what numpy's
+    would, in the same order, so the lines are those of the search written out in numpy.
+
+    Returns the lines' ``fit_values`` (a row each), how many candidates each of
+    ``REJECTIONS`` turned down, and the pieces refused as unsure of their direction: their
+    points' indices, one piece after another, and where each starts.
+    """
+    iterations, min_points, max_lines, scored = counts
+    max_gap, split_f, cov_scale, min_length, max_sd, lone_share, lone_length, lone_sd = limits
+    n_all = points.shape[0]
+    fits = np.empty((n_all // min_points + 1, _FIT_SIZE))
+    rejected = np.zeros(_REJECTION_COUNT, dtype=np.int64)
+    unsure = np.empty(n_all, dtype=np.intp)
+    unsure_starts = np.zeros(n_all // min_points + 2, dtype=np.intp)
+    n_fits = n_unsure = 0
+    remaining = np.arange(n_all)
+    while remaining.shape[0] >= min_points and n_fits < max_lines:
+        pts, sig, near = points[remaining], sigmas[remaining], band[remaining]
+        n = remaining.shape[0]
+        first = rng.integers(0, n, iterations)
+        second = (first + rng.integers(1, n, iterations)) % n  # never the same point
+        taken = line_inliers(pts, sig, near, first, second, -(-n // scored), min_points)
+        if taken.shape[0] == 0:
+            rejected[0] += 1
+            break
+        fit = fit_values(pts[taken], 1.0 / (sig[taken] * sig[taken]), False, cov_scale)
+        # The line's points cut at gaps along it and at kinks, each piece ordered along it.
+        along = pts[taken, 0] * -fit[1] + pts[taken, 1] * fit[0]
+        order = np.argsort(along)
+        pieces = segment_ranges(pts[taken], sig[taken], along, order, max_gap, min_points, split_f)
+        taken_out = np.zeros(n, dtype=np.bool_)
+        for k in range(pieces.shape[0]):
+            size = pieces[k, 1] - pieces[k, 0]
+            if size < min_points:
+                rejected[1] += 1
+                continue
+            idx = taken[order[pieces[k, 0] : pieces[k, 1]]]
+            taken_out[idx] = True
+            # A line not cut anywhere is the fit just made; only the pieces of a cut one are new.
+            piece = fit
+            if size != taken.shape[0]:
+                piece = fit_values(pts[idx], 1.0 / (sig[idx] * sig[idx]), False, cov_scale)
+            length = math.hypot(piece[_P1X] - piece[_P0X], piece[_P1Y] - piece[_P0Y])
+            limit = max_sd
+            if size / n_all >= lone_share and length >= lone_length:
+                limit = _larger(max_sd, lone_sd)  # a line with no neighbour to blend with
+            if length < min_length:
+                rejected[2] += 1
+            elif piece[_ANGLE_SD] > limit:
+                rejected[3] += 1
+                start = unsure_starts[n_unsure]
+                unsure[start : start + size] = remaining[idx]
+                n_unsure += 1
+                unsure_starts[n_unsure] = start + size
+            else:
+                fits[n_fits] = piece
+                n_fits += 1
+        if not taken_out.any():
+            break
+        remaining = remaining[~taken_out]
+    end = unsure_starts[n_unsure]
+    return fits[:n_fits].copy(), rejected, unsure[:end].copy(), unsure_starts[: n_unsure + 1].copy()
+
+
+@njit(cache=True, nogil=True)
+def row_lines(
+    points: Array,
+    sigmas: Array,
+    band: Array,
+    starts: Indices,
+    rng: np.random.Generator,
+    counts: tuple[int, int, int, int],
+    limits: tuple[float, float, float, float, float, float, float, float],
+) -> tuple[Array, Indices, NDArray[np.int64], Indices, Indices, Indices]:
+    """``sequential_lines`` over each cluster of a row in turn, in one call.
+
+    One call a row, not one a cluster: numba takes 10 us to hand a call its ``rng``.
+    ``points`` are the row's finite points cluster after cluster, the clusters starting at
+    ``starts`` (``cluster_bounds``); a cluster with fewer than min_points is passed over.
+    Returns the lines' ``fit_values`` and the cluster of each, the rejections summed over the
+    clusters, and the unsure pieces (indices within their cluster, where each starts, and the
+    cluster of each).
+    """
+    n, min_points = points.shape[0], counts[1]
+    room = n // min_points + 1
+    fits, fit_cluster = np.empty((room, _FIT_SIZE)), np.empty(room, dtype=np.intp)
+    rejected = np.zeros(_REJECTION_COUNT, dtype=np.int64)
+    unsure, unsure_cluster = np.empty(n, dtype=np.intp), np.empty(room, dtype=np.intp)
+    unsure_starts = np.zeros(room + 1, dtype=np.intp)
+    n_fits = n_pieces = 0
+    for c in range(starts.shape[0] - 1):
+        a, b = starts[c], starts[c + 1]
+        if b - a < min_points:
+            continue
+        found, refused, pieces, piece_starts = sequential_lines(
+            points[a:b], sigmas[a:b], band[a:b], rng, counts, limits
+        )
+        fits[n_fits : n_fits + found.shape[0]] = found
+        fit_cluster[n_fits : n_fits + found.shape[0]] = c
+        n_fits += found.shape[0]
+        rejected += refused
+        end = unsure_starts[n_pieces]
+        unsure[end : end + pieces.shape[0]] = pieces
+        for k in range(piece_starts.shape[0] - 1):
+            unsure_cluster[n_pieces] = c
+            n_pieces += 1
+            unsure_starts[n_pieces] = end + piece_starts[k + 1]
+    return (
+        fits[:n_fits].copy(),
+        fit_cluster[:n_fits].copy(),
+        rejected,
+        unsure[: unsure_starts[n_pieces]].copy(),
+        unsure_starts[: n_pieces + 1].copy(),
+        unsure_cluster[:n_pieces].copy(),
+    )
+
+
+@njit(cache=True, nogil=True)
 def cluster_bounds(points: Array, nan_run: int, max_jump: float) -> tuple[Indices, Indices]:
     """The finite points' indices and where clusters start among them (``split_at_nans``)."""
     n = points.shape[0]
@@ -259,3 +446,13 @@ def warm_up() -> None:
     along = points @ np.array([-ny, nx])
     segment_ranges(points, sigmas, along, np.argsort(along), 0.3, 12, 6.0)
     cluster_bounds(points, 0, math.inf)
+    fit_values(points, 1.0 / sigmas**2, False, 1.0)
+    row_lines(
+        points,
+        sigmas,
+        3 * sigmas,
+        np.array([0, 30], dtype=np.intp),
+        np.random.default_rng(0),
+        (8, 12, 8, 256),
+        (0.3, 6.0, 4.0, 0.25, 0.04, 0.9, 0.5, 0.1),
+    )

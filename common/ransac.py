@@ -2,10 +2,10 @@
 
 This is the paper's detector: the row is cut into clusters at NaN points (no return), and each
 cluster yields lines one after another, each time removing the inliers of the best line. Beyond
-the paper: hypotheses are scored all at once as a (hypotheses x points) matrix; the inlier band
-widens with range, as depth noise does; an accepted line is refitted by least squares and cut at
-gaps along it, so one line never bridges two walls that happen to be collinear across a doorway
-or an occluder.
+the paper: the inlier band widens with range, as depth noise does; an accepted line is refitted
+by least squares and cut at gaps along it and at kinks, so one line never bridges two walls that
+happen to be collinear across a doorway or an occluder. The search's loops are compiled
+(``line_kernels``); this module holds its settings and what is done with the lines it finds.
 """
 
 from __future__ import annotations
@@ -118,6 +118,17 @@ class RansacConfig:
     nan_run: int = 0
     max_jump: float = math.inf
 
+    def searched_by(
+        self,
+    ) -> tuple[
+        tuple[int, int, int, int], tuple[float, float, float, float, float, float, float, float]
+    ]:
+        """The counts and limits ``line_kernels.row_lines`` takes, in its order."""
+        counts = (self.iterations, self.min_points, self.max_lines, SCORED_POINTS)
+        limits = (self.max_gap, self.split_f, self.cov_scale, self.min_length)
+        lone = (self.max_angle_sd, self.lone_share, self.lone_length, self.lone_angle_sd)
+        return counts, (*limits, *lone)
+
     def scaled(self, factor: float) -> RansacConfig:
         """These, with the per-point noise scaled by ``factor`` (> 0): the noise learnt.
 
@@ -133,56 +144,18 @@ class RansacConfig:
         require(0 < self.lone_share <= 1, "lone_share", "within (0, 1]", self.lone_share)
 
 
-def split_at_nans(
-    points: Array, nan_run: int = 0, max_jump: float = math.inf
-) -> list[NDArray[np.intp]]:
-    """Indices of the clusters of finite points in a scan (N x 2): the paper's clusterByNaN.
-
-    With the defaults every invalid point splits, as in the paper: a depth camera's row is dense,
-    and a hole in it is an occlusion or glass. A real lidar drops single returns all along a
-    wall (a quarter of them on a cheap one), so for it runs of up to ``nan_run`` invalid points
-    do not split, and a jump of more than ``max_jump`` (m) between neighbours does.
-    """
-    index, starts = line_kernels().cluster_bounds(plain(points, np.float64), nan_run, max_jump)
-    return [index[a:b] for a, b in itertools.pairwise(starts.tolist())]
+def _grouped(order: list[int], items: list[Any], groups: int) -> list[list[Any]]:
+    """``items`` in lists by their group (``order``: each one's, ascending), ``groups`` lists."""
+    out: list[list[Any]] = [[] for _ in range(groups)]
+    for group, item in zip(order, items, strict=True):
+        out[group].append(item)
+    return out
 
 
 def point_sigmas(points: Array, params: RansacConfig) -> Array:
     """Per-point noise: a depth camera's grows with the square of the range."""
     range2 = np.einsum("ij,ij->i", points, points)
     return params.noise_scale * np.maximum(params.sigma_floor, params.noise_k * range2)
-
-
-def _inliers(
-    points: Array,
-    sigmas: Array,
-    band: Array,
-    rng: np.random.Generator,
-    iterations: int,
-    min_points: int,
-) -> NDArray[np.intp]:
-    """Inliers of the best of ``iterations`` two-point hypotheses, refitted once; may be empty.
-
-    Hypotheses are scored on evenly spaced points when there are many (neighbours on a dense
-    row say the same): about ``SCORED_POINTS`` of them.
-    """
-    n = len(points)
-    first = rng.integers(0, n, iterations)
-    second = (first + rng.integers(1, n, iterations)) % n  # never the same point
-    step = -(-n // SCORED_POINTS)
-    return line_kernels().line_inliers(points, sigmas, band, first, second, step, min_points)
-
-
-def _segments(
-    fit: LineFit, points: Array, sigmas: Array, params: RansacConfig
-) -> list[NDArray[np.intp]]:
-    """Cut the points of one line at gaps along it and at kinks; each piece ordered along it."""
-    along = points @ np.array([-fit.normal[1], fit.normal[0]])
-    order = np.argsort(along)
-    pieces = line_kernels().segment_ranges(
-        points, sigmas, along, order, params.max_gap, params.min_points, params.split_f
-    )
-    return [order[a:b] for a, b in pieces.tolist()]
 
 
 @dataclass
@@ -211,50 +184,6 @@ class RowReport:
         }
 
 
-def find_lines(
-    points: Array,
-    params: RansacConfig,
-    rng: np.random.Generator,
-    report: RowReport | None = None,
-) -> list[LineFit]:
-    """Sequential RANSAC over one cluster of finite points (N x 2)."""
-    rejected: Counter[str] = Counter() if report is None else report.rejected
-    lines: list[LineFit] = []
-    unsure: list[NDArray[np.intp]] = []  # pieces refused as unsure, for a second look
-    points = plain(points, np.float64)
-    remaining = np.arange(len(points))
-    sigmas_all = point_sigmas(points, params)
-    band_all = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas_all)
-    while len(remaining) >= params.min_points and len(lines) < params.max_lines:
-        pts, sigmas, band = points[remaining], sigmas_all[remaining], band_all[remaining]
-        taken = _inliers(pts, sigmas, band, rng, params.iterations, params.min_points)
-        if not len(taken):
-            rejected["no line with min_points inliers"] += 1
-            break
-        fit = fit_line(pts[taken], sigmas[taken], cov_scale=params.cov_scale)
-        accepted = []
-        for seg in _segments(fit, pts[taken], sigmas[taken], params):
-            if len(seg) < params.min_points:
-                rejected["piece below min_points (cut at a gap or kink)"] += 1
-                continue
-            idx = taken[seg]
-            # A line not cut anywhere is the fit just made; only the pieces of a cut one are new.
-            whole = len(seg) == len(taken)
-            seg_fit = fit if whole else fit_line(pts[idx], sigmas[idx], cov_scale=params.cov_scale)
-            if seg_fit.length < params.min_length:
-                rejected["shorter than min_length"] += 1
-            elif seg_fit.angle_sd > _angle_sd_limit(seg_fit, len(seg) / len(points), params):
-                rejected["direction less sure than max_angle_sd"] += 1
-                unsure.append(remaining[idx])
-            else:
-                lines.append(seg_fit)
-            accepted.append(taken[seg])
-        if not accepted:
-            break
-        remaining = np.delete(remaining, np.concatenate(accepted))
-    return lines + _joined(points, sigmas_all, unsure, params)
-
-
 def _joined(
     points: Array, sigmas: Array, pieces: list[NDArray[np.intp]], params: RansacConfig
 ) -> list[LineFit]:
@@ -279,13 +208,6 @@ def _joined(
             out.append(fit)
             joined = b
     return out
-
-
-def _angle_sd_limit(fit: LineFit, share: float, params: RansacConfig) -> float:
-    """The least sure direction accepted for a line holding ``share`` of its cluster."""
-    if share >= params.lone_share and fit.length >= params.lone_length:
-        return max(params.max_angle_sd, params.lone_angle_sd)
-    return params.max_angle_sd
 
 
 def meet_at_corners(lines: list[LineFit], params: RansacConfig) -> list[LineFit]:
@@ -322,20 +244,69 @@ def detect_lines(
 ) -> list[LineFit]:
     """All wall lines of one scan row (N x 2, NaN where there is no point).
 
+    The row is cut into clusters of finite points (the paper's clusterByNaN). With the default
+    settings every invalid point cuts, as in the paper: a depth camera's row is dense, and a
+    hole in it is an occlusion or glass. A real lidar drops single returns all along a wall (a
+    quarter of them on a cheap one), so for it runs of up to ``nan_run`` invalid points do not
+    cut, and a jump of more than ``max_jump`` (m) between neighbours does.
+
+    In each cluster of at least min_points, sequential RANSAC takes one line after another.
+    Each round scores ``iterations`` two-point hypotheses on about ``SCORED_POINTS`` evenly
+    spaced points (neighbours on a dense row say the same), refits the best one's inliers
+    once, cuts the line at gaps along it and at kinks, and takes each piece long enough and
+    sure enough of its direction; a piece turned down for its direction alone gets a second
+    look beside its neighbour (``_joined``). Lines of a cluster that nearly meet end at their
+    corner. The rounds run compiled, the whole row in one call (``line_kernels.row_lines``):
+    in numpy each round was a few dozen small array calls, most of a depth frame's detector
+    time.
+
     ``report``, when given, is filled with why the row gave these lines.
     """
+    kernels = line_kernels()
+    index, starts = kernels.cluster_bounds(plain(scan, np.float64), params.nan_run, params.max_jump)
+    points = plain(scan[index], np.float64)
+    sigmas = point_sigmas(points, params)
+    band = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas)
+    fits, fit_cluster, rejected, unsure, unsure_starts, unsure_cluster = kernels.row_lines(
+        points,
+        sigmas,
+        band,
+        starts,
+        rng,
+        *params.searched_by(),
+    )
+    bounds = list(itertools.pairwise(starts.tolist()))
+    found = _grouped(
+        fit_cluster.tolist(), [LineFit.from_values(f) for f in fits.tolist()], len(bounds)
+    )
+    pieces = [unsure[a:b] for a, b in itertools.pairwise(unsure_starts.tolist())]
+    doubtful = _grouped(unsure_cluster.tolist(), pieces, len(bounds))
     lines: list[LineFit] = []
-    clusters = split_at_nans(scan, params.nan_run, params.max_jump)
-    for cluster in clusters:
-        if len(cluster) >= params.min_points:
-            lines.extend(meet_at_corners(find_lines(scan[cluster], params, rng, report), params))
-        elif report is not None:
-            report.rejected["cluster below min_points"] += 1
+    for (a, b), taken, unsure_pieces in zip(bounds, found, doubtful, strict=True):
+        joined = _joined(points[a:b], sigmas[a:b], unsure_pieces, params) if unsure_pieces else []
+        if taken or joined:
+            lines.extend(meet_at_corners(taken + joined, params))
     if report is not None:
-        report.points = sum(len(c) for c in clusters)
-        report.clusters = [len(c) for c in clusters]
-        report.lines = [
-            {"points": line.n_points, "length": line.length, "angle_sd": line.angle_sd}
-            for line in lines
-        ]
+        _fill(report, rejected, [b - a for a, b in bounds], lines, params)
     return lines
+
+
+def _fill(
+    report: RowReport,
+    rejected: NDArray[np.int64],
+    sizes: list[int],
+    lines: list[LineFit],
+    params: RansacConfig,
+) -> None:
+    """Say in ``report`` what the row gave, and why not more."""
+    for reason, count in zip(line_kernels().REJECTIONS, rejected.tolist(), strict=True):
+        if count:
+            report.rejected[reason] += count
+    if small := sum(size < params.min_points for size in sizes):
+        report.rejected["cluster below min_points"] += small
+    report.points = sum(sizes)
+    report.clusters = sizes
+    report.lines = [
+        {"points": line.n_points, "length": line.length, "angle_sd": line.angle_sd}
+        for line in lines
+    ]
