@@ -97,7 +97,7 @@ def main() -> None:
     mine, ref = statistics.median(ours), statistics.median(theirs)
     print(f"{'implementation':<36} {'ms/frame (median)':>18} {'lines/frame':>12}")
     for name, seconds, lines in (
-        ("wallmap (vectorised sequential RANSAC)", mine, lines_ours),
+        ("wallmap (compiled sequential RANSAC)", mine, lines_ours),
         ("scikit-learn RANSACRegressor", ref, lines_theirs),
     ):
         print(f"{name:<36} {seconds * 1e3:>18.2f} {np.mean(lines):>12.1f}")

@@ -144,6 +144,17 @@ class RansacConfig:
         require(0 < self.lone_share <= 1, "lone_share", "within (0, 1]", self.lone_share)
 
 
+def split_at_nans(
+    points: Array, nan_run: int = 0, max_jump: float = math.inf
+) -> list[NDArray[np.intp]]:
+    """Indices of the clusters of finite points in a scan (N x 2): the paper's clusterByNaN.
+
+    ``detect_lines`` says how ``nan_run`` and ``max_jump`` cut, and cuts its rows so.
+    """
+    index, starts = line_kernels().cluster_bounds(plain(points, np.float64), nan_run, max_jump)
+    return [index[a:b] for a, b in itertools.pairwise(starts.tolist())]
+
+
 def _grouped(order: list[int], items: list[Any], groups: int) -> list[list[Any]]:
     """``items`` in lists by their group (``order``: each one's, ascending), ``groups`` lists."""
     out: list[list[Any]] = [[] for _ in range(groups)]

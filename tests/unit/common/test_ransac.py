@@ -1,23 +1,18 @@
 """Line detection in one scan row: clusters, sequential RANSAC, fit covariance."""
 
-import itertools
-
 import numpy as np
 import pytest
 
-from wallmap.common.compiled import line_kernels
 from wallmap.common.line_fit import fit_line
-from wallmap.common.ransac import RansacConfig, RowReport, detect_lines
+from wallmap.common.ransac import RansacConfig, RowReport, detect_lines, split_at_nans
 from wallmap.common.scan_row import RowSelection, select_scan
 
 
-def test_every_invalid_point_cuts_a_row_into_runs_of_finite_points():
+def test_split_at_nans_gives_runs_of_finite_points():
     scan = np.array([[1, 1], [np.nan, 0], [2, 2], [3, 3], [np.nan, np.nan], [4, 4]], float)
-    index, starts = line_kernels().cluster_bounds(scan, 0, np.inf)
-    assert [index[a:b].tolist() for a, b in itertools.pairwise(starts)] == [[0], [2, 3], [5]]
-    index, starts = line_kernels().cluster_bounds(np.full((4, 2), np.nan), 0, np.inf)
-    assert index.size == 0
-    assert starts.tolist() == [0]
+    runs = split_at_nans(scan)
+    assert [r.tolist() for r in runs] == [[0], [2, 3], [5]]
+    assert split_at_nans(np.full((4, 2), np.nan)) == []
 
 
 def test_fit_covariance_matches_monte_carlo():
