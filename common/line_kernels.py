@@ -245,7 +245,7 @@ def segment_ranges(
 
     ``along``: the points' positions along the line; ``order``: their sorting (numpy's, passed
     in: a sort compiled here costs seconds of compiling). Each piece is a (start, end) row, in
-    the order ``ransac._segments`` hands them out.
+    the order ``sequential_lines`` takes them.
     """
     n = points.shape[0]
     ordered = np.empty((n, 2))
@@ -280,6 +280,45 @@ def segment_ranges(
 
 
 @njit(cache=True, nogil=True)
+def _round_inliers(
+    pts: Array, sig: Array, near: Array, rng: np.random.Generator, counts: tuple[int, int, int, int]
+) -> Indices:
+    """One round: hypotheses drawn and scored, the best one's inliers refitted (line_inliers)."""
+    iterations, min_points, _, scored = counts
+    n = pts.shape[0]
+    first = rng.integers(0, n, iterations)
+    second = (first + rng.integers(1, n, iterations)) % n  # never the same point
+    return line_inliers(pts, sig, near, first, second, -(-n // scored), min_points)
+
+
+@njit(cache=True, nogil=True)
+def _pieces(
+    pts: Array, sig: Array, fit: Array, max_gap: float, min_points: int, split_f: float
+) -> tuple[Indices, Indices]:
+    """A line's points cut at gaps along it and at kinks: their order along it, the pieces."""
+    along = pts[:, 0] * -fit[1] + pts[:, 1] * fit[0]
+    order = np.argsort(along)
+    return order, segment_ranges(pts, sig, along, order, max_gap, min_points, split_f)
+
+
+@njit(cache=True, nogil=True)
+def _refusal(piece: Array, share: float, limits: tuple[float, ...]) -> int:
+    """Why a piece of a line is not one (an index into ``REJECTIONS``), or -1: it is.
+
+    ``share``: of its cluster's points. A line with most of them, and long, has no neighbour to
+    blend with, and may be less sure of its direction.
+    """
+    _, _, _, min_length, max_sd, lone_share, lone_length, lone_sd = limits
+    length = math.hypot(piece[_P1X] - piece[_P0X], piece[_P1Y] - piece[_P0Y])
+    limit = max_sd
+    if share >= lone_share and length >= lone_length:
+        limit = _larger(max_sd, lone_sd)
+    if length < min_length:
+        return 2
+    return 3 if piece[_ANGLE_SD] > limit else -1
+
+
+@njit(cache=True, nogil=True)
 def sequential_lines(
     points: Array,
     sigmas: Array,
@@ -288,19 +327,14 @@ def sequential_lines(
     counts: tuple[int, int, int, int],
     limits: tuple[float, float, float, float, float, float, float, float],
 ) -> tuple[Array, NDArray[np.int64], Indices, Indices]:
-    """``ransac.find_lines``' search, one line after another, in one call.
+    """One cluster's sequential RANSAC (``ransac.detect_lines`` says what it does).
 
-    ``counts``: iterations, min_points, max_lines and the points a hypothesis is scored on;
-    ``limits``: max_gap, split_f, cov_scale, min_length, max_angle_sd, lone_share, lone_length
-    and lone_angle_sd (``ransac.RansacConfig`` says what each is). ``rng`` draws what numpy's
-    would, in the same order, so the lines are those of the search written out in numpy.
-
-    Returns the lines' ``fit_values`` (a row each), how many candidates each of
-    ``REJECTIONS`` turned down, and the pieces refused as unsure of their direction: their
-    points' indices, one piece after another, and where each starts.
+    ``counts`` and ``limits``: ``ransac.RansacConfig.searched_by``'s. Returns the lines'
+    ``fit_values`` (a row each), how many candidates each of ``REJECTIONS`` turned down, and
+    the pieces unsure of their direction (their points, one after another; where each starts).
     """
-    iterations, min_points, max_lines, scored = counts
-    max_gap, split_f, cov_scale, min_length, max_sd, lone_share, lone_length, lone_sd = limits
+    _, min_points, max_lines, _ = counts
+    max_gap, split_f, cov_scale = limits[0], limits[1], limits[2]
     n_all = points.shape[0]
     fits = np.empty((n_all // min_points + 1, _FIT_SIZE))
     rejected = np.zeros(_REJECTION_COUNT, dtype=np.int64)
@@ -309,20 +343,14 @@ def sequential_lines(
     n_fits = n_unsure = 0
     remaining = np.arange(n_all)
     while remaining.shape[0] >= min_points and n_fits < max_lines:
-        pts, sig, near = points[remaining], sigmas[remaining], band[remaining]
-        n = remaining.shape[0]
-        first = rng.integers(0, n, iterations)
-        second = (first + rng.integers(1, n, iterations)) % n  # never the same point
-        taken = line_inliers(pts, sig, near, first, second, -(-n // scored), min_points)
+        pts, sig = points[remaining], sigmas[remaining]
+        taken = _round_inliers(pts, sig, band[remaining], rng, counts)
         if taken.shape[0] == 0:
             rejected[0] += 1
             break
         fit = fit_values(pts[taken], 1.0 / (sig[taken] * sig[taken]), False, cov_scale)
-        # The line's points cut at gaps along it and at kinks, each piece ordered along it.
-        along = pts[taken, 0] * -fit[1] + pts[taken, 1] * fit[0]
-        order = np.argsort(along)
-        pieces = segment_ranges(pts[taken], sig[taken], along, order, max_gap, min_points, split_f)
-        taken_out = np.zeros(n, dtype=np.bool_)
+        order, pieces = _pieces(pts[taken], sig[taken], fit, max_gap, min_points, split_f)
+        taken_out = np.zeros(remaining.shape[0], dtype=np.bool_)
         for k in range(pieces.shape[0]):
             size = pieces[k, 1] - pieces[k, 0]
             if size < min_points:
@@ -334,21 +362,17 @@ def sequential_lines(
             piece = fit
             if size != taken.shape[0]:
                 piece = fit_values(pts[idx], 1.0 / (sig[idx] * sig[idx]), False, cov_scale)
-            length = math.hypot(piece[_P1X] - piece[_P0X], piece[_P1Y] - piece[_P0Y])
-            limit = max_sd
-            if size / n_all >= lone_share and length >= lone_length:
-                limit = _larger(max_sd, lone_sd)  # a line with no neighbour to blend with
-            if length < min_length:
-                rejected[2] += 1
-            elif piece[_ANGLE_SD] > limit:
-                rejected[3] += 1
+            refusal = _refusal(piece, size / n_all, limits)
+            if refusal < 0:
+                fits[n_fits] = piece
+                n_fits += 1
+                continue
+            rejected[refusal] += 1
+            if refusal == 3:  # unsure of its direction: a second look beside its neighbour
                 start = unsure_starts[n_unsure]
                 unsure[start : start + size] = remaining[idx]
                 n_unsure += 1
                 unsure_starts[n_unsure] = start + size
-            else:
-                fits[n_fits] = piece
-                n_fits += 1
         if not taken_out.any():
             break
         remaining = remaining[~taken_out]

@@ -123,7 +123,12 @@ class RansacConfig:
     ) -> tuple[
         tuple[int, int, int, int], tuple[float, float, float, float, float, float, float, float]
     ]:
-        """The counts and limits ``line_kernels.row_lines`` takes, in its order."""
+        """What ``line_kernels.row_lines`` takes: counts and limits, in its order.
+
+        The counts: iterations, min_points, max_lines and the points a hypothesis is scored on;
+        the limits: max_gap, split_f, cov_scale, min_length, max_angle_sd, lone_share,
+        lone_length and lone_angle_sd.
+        """
         counts = (self.iterations, self.min_points, self.max_lines, SCORED_POINTS)
         limits = (self.max_gap, self.split_f, self.cov_scale, self.min_length)
         lone = (self.max_angle_sd, self.lone_share, self.lone_length, self.lone_angle_sd)
