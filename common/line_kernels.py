@@ -22,6 +22,9 @@ from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
 Indices = NDArray[np.intp]
+# The line search's settings as ``ransac.RansacConfig.searched_by`` hands them over.
+Counts = tuple[int, int, int, int]
+Limits = tuple[float, float, float, float, float, float, float, float]
 
 
 @njit(cache=True, nogil=True)
@@ -281,7 +284,7 @@ def segment_ranges(
 
 @njit(cache=True, nogil=True)
 def _round_inliers(
-    pts: Array, sig: Array, near: Array, rng: np.random.Generator, counts: tuple[int, int, int, int]
+    pts: Array, sig: Array, near: Array, rng: np.random.Generator, counts: Counts
 ) -> Indices:
     """One round: hypotheses drawn and scored, the best one's inliers refitted (line_inliers)."""
     iterations, min_points, _, scored = counts
@@ -302,7 +305,7 @@ def _pieces(
 
 
 @njit(cache=True, nogil=True)
-def _refusal(piece: Array, share: float, limits: tuple[float, ...]) -> int:
+def _refusal(piece: Array, share: float, limits: Limits) -> int:
     """Why a piece of a line is not one (an index into ``REJECTIONS``), or -1: it is.
 
     ``share``: of its cluster's points. A line with most of them, and long, has no neighbour to
@@ -324,8 +327,8 @@ def sequential_lines(
     sigmas: Array,
     band: Array,
     rng: np.random.Generator,
-    counts: tuple[int, int, int, int],
-    limits: tuple[float, float, float, float, float, float, float, float],
+    counts: Counts,
+    limits: Limits,
 ) -> tuple[Array, NDArray[np.int64], Indices, Indices]:
     """One cluster's sequential RANSAC (``ransac.detect_lines`` says what it does).
 
@@ -387,8 +390,8 @@ def row_lines(
     band: Array,
     starts: Indices,
     rng: np.random.Generator,
-    counts: tuple[int, int, int, int],
-    limits: tuple[float, float, float, float, float, float, float, float],
+    counts: Counts,
+    limits: Limits,
 ) -> tuple[Array, Indices, NDArray[np.int64], Indices, Indices, Indices]:
     """``sequential_lines`` over each cluster of a row in turn, in one call.
 

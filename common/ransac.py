@@ -15,7 +15,7 @@ import itertools
 import math
 from collections import Counter
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +23,9 @@ from numpy.typing import NDArray
 from wallmap.common.compiled import line_kernels, plain
 from wallmap.common.config_file import require
 from wallmap.common.line_fit import LineFit, bend_split, fit_line
+
+if TYPE_CHECKING:  # the kernels' module imports numba: loaded where it runs, not here
+    from wallmap.common.line_kernels import Counts, Limits
 
 Array = NDArray[np.float64]
 SCORED_POINTS = 256  # hypotheses are scored on about this many points of a cluster
@@ -118,11 +121,7 @@ class RansacConfig:
     nan_run: int = 0
     max_jump: float = math.inf
 
-    def searched_by(
-        self,
-    ) -> tuple[
-        tuple[int, int, int, int], tuple[float, float, float, float, float, float, float, float]
-    ]:
+    def searched_by(self) -> tuple[Counts, Limits]:
         """What ``line_kernels.row_lines`` takes: counts and limits, in its order.
 
         The counts: iterations, min_points, max_lines and the points a hypothesis is scored on;
