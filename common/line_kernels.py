@@ -463,17 +463,16 @@ def cluster_bounds(points: Array, nan_run: int, max_jump: float) -> tuple[Indice
 
 
 def warm_up() -> None:
-    """Compile (or load from the cache) every kernel now, not on the first frame."""
+    """Compile (or load from the cache) the kernels Python calls, now, not on the first frame.
+
+    The others (``line_inliers``, ``segment_ranges``, ...) run inside these only: their own
+    entry points would be loaded from the cache for nothing.
+    """
     points = np.array([[1.0, float(i) * 0.05] for i in range(30)])
     sigmas = np.full(30, 0.01)
-    pick = np.arange(4, dtype=np.intp)
-    line_inliers(points, sigmas, 3 * sigmas, pick, pick + 10, 1, 12)
-    nx, ny, _, cx, cy, _ = weighted_line(points, 1.0 / sigmas**2)
-    line_spread(points, 1.0 / sigmas**2, nx, ny, cx, cy)
-    along = points @ np.array([-ny, nx])
-    segment_ranges(points, sigmas, along, np.argsort(along), 0.3, 12, 6.0)
     cluster_bounds(points, 0, math.inf)
     fit_values(points, 1.0 / sigmas**2, False, 1.0)
+    bend_cut(points, sigmas, 12, 6.0)
     row_lines(
         points,
         sigmas,

@@ -278,8 +278,9 @@ def detect_lines(
     ``report``, when given, is filled with why the row gave these lines.
     """
     kernels = line_kernels()
-    index, starts = kernels.cluster_bounds(plain(scan, np.float64), params.nan_run, params.max_jump)
-    points = plain(scan[index], np.float64)
+    scan = plain(scan, np.float64)
+    index, starts = kernels.cluster_bounds(scan, params.nan_run, params.max_jump)
+    points = scan[index]
     sigmas = point_sigmas(points, params)
     band = np.maximum(params.inlier_min, params.inlier_sigmas * sigmas)
     fits, fit_cluster, rejected, unsure, unsure_starts, unsure_cluster = kernels.row_lines(

@@ -44,7 +44,9 @@ def searched(points, sigmas, band, rng, p: RansacConfig):
                 rejected[1] += 1
                 continue
             idx = taken[order[a:b]]
-            piece = fit if b - a == len(taken) else fit_line(pts[idx], sig[idx], cov_scale=4.0)
+            piece = (
+                fit if b - a == len(taken) else fit_line(pts[idx], sig[idx], cov_scale=p.cov_scale)
+            )
             lone = (b - a) / len(points) >= p.lone_share and piece.length >= p.lone_length
             limit = max(p.max_angle_sd, p.lone_angle_sd) if lone else p.max_angle_sd
             if piece.length < p.min_length:
