@@ -73,8 +73,9 @@ def headings(rotations: Array, forward: int = FORWARD_X) -> Array:
     side, turn = (1, -math.pi / 2) if forward == FORWARD_X else (0, math.pi / 2)
     across = rotations[:, :, side]
     looking = np.hypot(ahead[:, 0], ahead[:, 1]) > 0.2
-    return np.where(
-        looking,
-        np.arctan2(ahead[:, 1], ahead[:, 0]),
-        np.arctan2(across[:, 1], across[:, 0]) + turn,
-    )
+    y = np.where(looking, ahead[:, 1], across[:, 1]).tolist()
+    x = np.where(looking, ahead[:, 0], across[:, 0]).tolist()
+    # math.atan2, as ``heading`` takes it: numpy's vectorized arctan2 may differ from it in the
+    # last bit (numpy 2.4's does), and a pose must be the same whichever way it was levelled.
+    angles = np.array(list(map(math.atan2, y, x)), dtype=np.float64)
+    return np.where(looking, angles, angles + turn)
