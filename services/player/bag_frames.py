@@ -165,7 +165,7 @@ class BagFrames(ClosingSource):
                     getattr(msg, "height", 1),
                     rows,
                     mount,
-                    self.placement.band,
+                    self.placement,
                 )
             except PlayerError as err:
                 raise PlayerError(f"{self.sensor_topic} message {index}: {err}") from err

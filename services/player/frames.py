@@ -9,6 +9,7 @@ import numpy as np
 
 from wallmap.common.messages import Frame
 from wallmap.common.scan_row import DEFAULT_BAND, RowSelection, pick_points, rows_to_search
+from wallmap.services.player.placement import Placement
 from wallmap.services.player.pointcloud import invalid_to_nan
 
 
@@ -63,14 +64,16 @@ def hand_out(
     height: int,
     rows: RowSelection | None,
     mount: np.ndarray,
-    seen: tuple[float, float] | None,
+    placement: Placement,
 ) -> tuple[np.ndarray, tuple[float, float] | None]:
     """One frame's points as the player sends them, and the band they stack (or None).
 
     ``read(rows)`` decodes those image rows of a frame ``height`` rows high. With ``rows`` None:
     every row. Else only the rows the selection searches are read (decoding whole clouds is most
     of a player's time) and the band's stack, or one row, is picked (``pick_points``); the band
-    is the selection's, or ``seen`` (what the sensor sees), or the default.
+    is the selection's, or the one the sensor sees (``placement.band``), or the default. Of a
+    band's rows, those whose rays never come near it are not read (``placement.rays``: the
+    stack is the same without them).
 
     The points are float32 and the caller's own (not a view over the message), and a point
     without all three coordinates is all NaN, so consumers test one value for "no return". A
@@ -78,8 +81,13 @@ def hand_out(
     """
     if rows is None:
         return _whole_points(read(slice(None))), None
-    band = rows.band or seen or DEFAULT_BAND
-    points = pick_points(read(rows_to_search(rows, height)), mount, band)
+    band = rows.band or placement.band or DEFAULT_BAND
+    searched = rows_to_search(rows, height)
+    rays = placement.rays
+    points = read(searched if rays is None else rays.reaching(searched, height, mount, band))
+    if rays is not None and points.shape[1] != rays.width:
+        points = read(searched)  # not the camera surveyed: every searched row
+    points = pick_points(points, mount, band)
     if points.shape[0] > 1:
         return points, band
     return _whole_points(points), None

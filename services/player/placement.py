@@ -11,7 +11,7 @@ the detector needs them to find the band.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from wallmap.common.level import Level, level_from_frames
 from wallmap.common.messages import Pose
+from wallmap.common.pixel_rays import PixelRays, fit_pixel_rays
 from wallmap.common.pose3d import FORWARD_Z, forward_axis, split_planar
 from wallmap.common.pose3d_batch import headings
 from wallmap.common.scan_row import DEFAULT_BAND, auto_band
@@ -31,11 +32,15 @@ SURVEY_POINTS = 4000  # points per surveyed frame
 
 @dataclass(frozen=True)
 class Sample:
-    """One surveyed frame: its points (sensor frame), T_fixed_sensor, the sensor frame's name."""
+    """One surveyed frame: its points (sensor frame), T_fixed_sensor, the sensor frame's name.
+
+    ``rows``: the image rows ``points`` holds (all of them, or every k-th: a live survey's).
+    """
 
     points: NDArray[np.float32]
     T_fixed_sensor: Array
     sensor_frame: str
+    rows: slice = field(default_factory=lambda: slice(None))
 
     def up(self) -> Array:
         """The sensor's own up axis in the fixed frame: -y of an optical frame, z of a body one."""
@@ -52,12 +57,15 @@ class Placement:
         forward: The robot (or sensor) frame's forward axis, whose heading is the planar yaw.
         level: What the survey found (None when there was nothing to survey).
         band: The height band the sensor sees (None: unknown, the detector's default holds).
+        rays: The sensor's pixel rays, so that the rows which never see the band are not read
+            (None: not a pinhole camera, or nothing surveyed; every searched row is read).
     """
 
     levelling: Array
     forward: int
     level: Level | None = None
     band: tuple[float, float] | None = None
+    rays: PixelRays | None = None
 
     def place(self, pose: Pose | None, mount: Array) -> tuple[Pose | None, Array]:
         """A frame's planar pose and its mount (T_base_sensor) with the pose's tilt in it.
@@ -134,11 +142,12 @@ def survey(
         positions = np.array([s.T_fixed_sensor[:3, 3] for s in samples])
         level = level_from_frames(clouds, ups, positions, np.random.default_rng(seed))
         levelling = level.matrix(floor_z)
-    band = None
+    band, rays = None, None
     if samples:
         heights = np.concatenate([c @ levelling[2, :3] + levelling[2, 3] for c in clouds])
         band = auto_band(heights, DEFAULT_BAND)
-    return Placement(levelling, forward, level, band)
+        rays = fit_pixel_rays([(s.points, s.rows) for s in samples])
+    return Placement(levelling, forward, level, band, rays)
 
 
 def _in_fixed_frame(sample: Sample) -> Array:

@@ -239,7 +239,7 @@ class TumFolder(ClosingSource):
                 self.size[0],
                 rows,
                 mount,
-                self.placement.band,
+                self.placement,
             )
             frame = SensorFrame(
                 stamp,

@@ -198,7 +198,8 @@ class LiveFrames:
     ) -> None:
         """A frame held for the survey, its points (some rows) surveyed."""
         read, height = self._reader(waiting.message)
-        survey.add(waiting.stamp, read(survey_rows(height)), pose, mount, waiting.frame_id)
+        rows = survey_rows(height)
+        survey.add(waiting.stamp, read(rows), pose, mount, waiting.frame_id, rows)
         self._held.append((waiting, pose, mount))
 
     def _end_survey(self, survey: LiveSurvey) -> list[SensorFrame]:
@@ -300,7 +301,7 @@ class LiveFrames:
         """A frame as the player sends it: the robot's tilt in its mount, its band's rows."""
         mount = self._placement.place(pose, mount)[1]
         read, height = self._reader(waiting.message)
-        points, band = hand_out(read, height, self.rows, mount, self._placement.band)
+        points, band = hand_out(read, height, self.rows, mount, self._placement)
         return SensorFrame(waiting.stamp, waiting.frame_id, points, mount, band=band)
 
     def _reader(self, msg: Any) -> tuple[Callable[[slice], np.ndarray], int]:

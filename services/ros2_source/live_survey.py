@@ -40,11 +40,15 @@ class LiveSurvey:
         pose: Pose | None,
         mount: np.ndarray,
         sensor_frame: str,
+        rows: slice = slice(None),
     ) -> None:
-        """A held frame (the first starts the clock); one without a pose is not surveyed."""
+        """A held frame (the first starts the clock); one without a pose is not surveyed.
+
+        ``rows``: the image rows ``points`` holds (``survey_rows``).
+        """
         self._first = stamp if self._first is None else min(self._first, stamp)
         if pose is not None:
-            self.samples.append(Sample(points, pose.matrix @ mount, sensor_frame))
+            self.samples.append(Sample(points, pose.matrix @ mount, sensor_frame, rows))
 
     def complete(self, newest: float) -> bool:
         """Whether enough is held: ``FRAMES`` frames, or ``SECONDS`` of the robot's time."""

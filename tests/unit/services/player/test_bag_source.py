@@ -1,6 +1,7 @@
 """BagSource on bags written here with rosbags (ROS 1, ROS 2 mcap and sqlite3) and real bags,
 plus the pose-source specs, pose tracks and TUM files it relies on."""
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from pathlib import Path
@@ -777,3 +778,28 @@ def test_player_rows_are_the_detectors_rows(tmp_path: Path) -> None:
         picked = select_points(row.points, row.T_base_sensor, how, stacked=True)
         np.testing.assert_array_equal(picked, expected)
         assert np.isfinite(expected).all(axis=1).sum() > 24  # the band is seen: a real check
+
+
+def test_the_rows_that_cannot_see_the_band_are_not_read(tmp_path: Path) -> None:
+    """A level camera 1 m up, under the band: its lower rows are left in the bag, and the
+    stacks are those of every searched row, to the bit."""
+    bag = tmp_path / "level.bag"
+    write_scene_bag(
+        bag, seed=5, n_frames=8, fmt="ros1", sensor="pointcloud", camera=Camera(160, 120)
+    )
+    how = RowSelection()
+    with BagSource(bag) as source:
+        assert source.placement.rays is not None, "a generated camera is a pinhole"
+        read: list[slice] = []
+        decode = source._decode
+        source._decode = lambda msg, rows: read.append(rows) or decode(msg, rows)
+        pruned = [frame for frame, _ in source.frames(how)]
+        source._decode = decode
+        source.placement = dataclasses.replace(source.placement, rays=None)
+        every = [frame for frame, _ in source.frames(how)]
+    searched = len(range(120)[rows_to_search(how, 120)])
+    assert len(read) == len(pruned) == len(every) == 8
+    assert all(rows.start == 0 and len(range(120)[rows]) < 0.7 * searched for rows in read)
+    for kept, whole in zip(pruned, every, strict=True):
+        np.testing.assert_array_equal(kept.points, whole.points)
+        assert np.isfinite(kept.points).all(axis=-1).sum() > 100  # the band is seen

@@ -7,6 +7,7 @@ import numpy as np
 from wallmap.common.messages import pack, unpack_frame
 from wallmap.common.scan_row import RowSelection
 from wallmap.services.player.frames import SensorFrame, hand_out
+from wallmap.services.player.placement import unlevelled
 
 
 def test_a_sensor_frame_goes_on_the_wire_with_all_it_carries() -> None:
@@ -44,7 +45,9 @@ def test_a_row_is_handed_out_as_the_callers_own_with_partial_points_blanked() ->
     """Every source (a bag, a TUM folder, a live ROS 2 topic) gets the same points from it."""
     message = _message(1)
     for rows in (None, RowSelection()):
-        points, band = hand_out(lambda wanted: message[wanted], 1, rows, np.eye(4), None)
+        points, band = hand_out(
+            lambda wanted: message[wanted], 1, rows, np.eye(4), unlevelled("base_link")
+        )
         assert band is None
         assert points.dtype == np.float32
         assert points.base is None  # not a view over the message
@@ -57,7 +60,9 @@ def test_a_row_is_handed_out_as_the_callers_own_with_partial_points_blanked() ->
 def test_a_band_stack_is_handed_out_as_it_was_picked() -> None:
     message = _message(64)
     mount = np.array([[0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 0.6], [0, 0, 0, 1.0]])
-    points, band = hand_out(lambda wanted: message[wanted], 64, RowSelection(), mount, None)
+    points, band = hand_out(
+        lambda wanted: message[wanted], 64, RowSelection(), mount, unlevelled("base_link")
+    )
     assert band is not None
     assert points.shape[0] > 1
     finite = np.isfinite(points)
