@@ -178,9 +178,10 @@ class BagFile:
 
         Args:
             topics: The topics to read.
-            mapped: Read an uncompressed ROS 1 bag as views over the mapped file (see
-                ``mapped_bag``): for large clouds of which only some rows are read, and for
-                small messages (tf, poses) among them, whose chunks rosbags reads whole.
+            mapped: Read a ROS 1 bag as views over the mapped file, or over its chunks
+                decompressed one ahead on a worker (see ``mapped_bag``): for large clouds of
+                which only some rows are read, and for small messages (tf, poses) among them,
+                whose chunks rosbags reads whole.
             start: Bag time (ns) of the first message kept.
             stop: Bag time (ns) before which messages are kept.
 

@@ -1,11 +1,14 @@
-"""The raw messages of an uncompressed ROS 1 bag as views over a memory map, copying nothing.
+"""The raw messages of a ROS 1 bag as views, copying nothing: over a memory map, or over a chunk.
 
 rosbags reads a whole chunk into memory and copies each message out of it: every byte is copied
 twice, 2.3 ms for one 640x480 cloud (10 MB) here. The player needs only the image rows the
-detector searches, so for the common uncompressed bag it maps the file and hands rosbags'
-deserializer a view: only the pages under those rows are ever read. rosbags' own index (the chunk
-and message positions it parsed when it opened the bag) says where each message lies, and rosbags
-still deserializes it; compressed chunks and ROS 2 bags go through rosbags' reader.
+detector searches, so for an uncompressed bag it maps the file and hands rosbags' deserializer a
+view: only the pages under those rows are ever read. A compressed chunk (LZ4, bz2) must be
+decompressed whole, but once: its messages are views over it, and the next chunk is decompressed
+meanwhile on a worker thread (both decompressors let go of the interpreter), so a player no
+longer decompresses, copies and decodes one frame after the other on one core. rosbags' own
+index (the chunk and message positions it parsed when it opened the bag) says where each message
+lies, and rosbags still deserializes it; ROS 2 bags go through rosbags' reader.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import heapq
 import mmap
 from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 from wallmap.services.player.errors import PlayerError
@@ -22,17 +26,19 @@ if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
 
+Raw = tuple["Connection", int, memoryview]  # connection, receive time (ns), the message's bytes
+
 
 def mapped_messages(
     reader: AnyReader,
     connections: Sequence[Connection],
     start: int | None = None,
     stop: int | None = None,
-) -> Iterator[tuple[Connection, int, memoryview]] | None:
-    """(connection, stamp ns, raw message view) in time order, or None for bags it cannot map.
+) -> Iterator[Raw] | None:
+    """(connection, stamp ns, raw message view) in time order, or None for bags it cannot read.
 
-    Only a single uncompressed ROS 1 bag qualifies; the caller then reads with rosbags. As with
-    rosbags, ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``.
+    Only a single ROS 1 bag qualifies; the caller then reads with rosbags. As with rosbags,
+    ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``.
     """
     # Imported here: the bag's reader has loaded them, and a process that reads no bag (the
     # mapper, whose configuration names the player's settings) need not.
@@ -47,29 +53,66 @@ def mapped_messages(
         for entry in heapq.merge(*(bag.indexes[c.id] for c in connections))
         if (start is None or entry.time >= start) and (stop is None or entry.time < stop)
     ]
-    plain = decompressors["none"]
-    if any(bag.chunks[entry.chunk_pos].decompressor is not plain for entry in entries):
-        return None
     with bag.path.open("rb") as file:  # the map keeps its own reference to the file
         mapped = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
     # Not closed here: deserialized messages are views into it, and it goes when they do.
-    return _messages(memoryview(mapped), bag.chunks, entries, {c.id: c for c in connections})
+    by_id = {c.id: c for c in connections}
+    plain = decompressors["none"]
+    if all(bag.chunks[entry.chunk_pos].decompressor is plain for entry in entries):
+        return _mapped(memoryview(mapped), bag.chunks, entries, by_id)
+    return _unpacked(memoryview(mapped), bag.chunks, entries, by_id)
 
 
-def _messages(
+def _mapped(
     view: memoryview, chunks: dict[int, Any], entries: list[Any], by_id: dict[int, Connection]
-) -> Iterator[tuple[Connection, int, memoryview]]:
+) -> Iterator[Raw]:
     for entry in entries:
-        pos = chunks[entry.chunk_pos].datapos + entry.offset
-        while True:  # connection records may precede a message, as rosbags also allows
-            fields, pos = record_header(view, pos)
-            (size,) = UINT32.unpack_from(view, pos)
-            pos += 4
-            if fields.get("op") != OP_CONNECTION:
-                break
-            pos += size
-        if fields.get("op") != OP_MSGDATA or pos + size > len(view):
-            msg = f"no message data where the bag's index points (byte {pos})"
-            raise PlayerError(msg)
-        (conn,) = UINT32.unpack(fields["conn"])
-        yield by_id[conn], entry.time, view[pos : pos + size]
+        conn, data = _message_at(view, chunks[entry.chunk_pos].datapos + entry.offset)
+        yield by_id[conn], entry.time, data
+
+
+def _unpacked(
+    view: memoryview, chunks: dict[int, Any], entries: list[Any], by_id: dict[int, Connection]
+) -> Iterator[Raw]:
+    """The messages of compressed chunks: each chunk decompressed once, the next one meanwhile.
+
+    Chunks are decompressed in the order the messages first need them, one ahead of the one
+    read, and let go after their last message (what was deserialized from one keeps it alive).
+    """
+    order = list(dict.fromkeys(entry.chunk_pos for entry in entries))
+    rank = {pos: k for k, pos in enumerate(order)}
+    last = {entry.chunk_pos: k for k, entry in enumerate(entries)}
+
+    def unpack(pos: int) -> memoryview:
+        chunk = chunks[pos]
+        return memoryview(chunk.decompressor(view[chunk.datapos : chunk.datapos + chunk.datasize]))
+
+    worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="unpack")
+    ready: dict[int, Future[memoryview]] = {}
+    try:
+        for k, entry in enumerate(entries):
+            for pos in order[rank[entry.chunk_pos] : rank[entry.chunk_pos] + 2]:
+                if pos not in ready and last[pos] >= k:
+                    ready[pos] = worker.submit(unpack, pos)
+            conn, data = _message_at(ready[entry.chunk_pos].result(), entry.offset)
+            if last[entry.chunk_pos] == k:
+                del ready[entry.chunk_pos]
+            yield by_id[conn], entry.time, data
+    finally:  # a reader that stopped early (the survey's first frame) waits for no chunk
+        worker.shutdown(wait=False, cancel_futures=True)
+
+
+def _message_at(view: memoryview, pos: int) -> tuple[int, memoryview]:
+    """The connection id and the data of the message record at ``pos`` (connections skipped)."""
+    while True:  # connection records may precede a message, as rosbags also allows
+        fields, pos = record_header(view, pos)
+        (size,) = UINT32.unpack_from(view, pos)
+        pos += 4
+        if fields.get("op") != OP_CONNECTION:
+            break
+        pos += size
+    if fields.get("op") != OP_MSGDATA or pos + size > len(view):
+        msg = f"no message data where the bag's index points (byte {pos})"
+        raise PlayerError(msg)
+    (conn,) = UINT32.unpack(fields["conn"])
+    return conn, view[pos : pos + size]

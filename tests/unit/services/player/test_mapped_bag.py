@@ -1,10 +1,13 @@
-"""Reading an uncompressed ROS 1 bag through a memory map gives exactly rosbags' messages."""
+"""Reading a ROS 1 bag through a memory map, or its chunks decompressed ahead, gives exactly
+rosbags' messages."""
 
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Writer1
 
 from wallmap.common.scan_row import RowSelection
 from wallmap.scene import Camera, write_scene_bag
@@ -35,13 +38,50 @@ def test_mapped_messages_are_rosbags_messages(tmp_path: Path) -> None:
     assert got == expected
 
 
-def test_compressed_and_ros2_bags_are_left_to_rosbags(tmp_path: Path) -> None:
-    for bag in (
-        _bag(tmp_path, "lz4.bag", fmt="ros1", compress=True),
-        _bag(tmp_path, "ros2", fmt="ros2-mcap"),
-    ):
-        with AnyReader([bag]) as reader:
-            assert mapped_messages(reader, reader.connections) is None
+def _repacked(plain: Path, path: Path, compression: Writer1.CompressionFormat) -> Path:
+    """``plain``'s messages again, in chunks of about 16 kB compressed with ``compression``."""
+    writer = Writer1(path)
+    writer.set_compression(compression)
+    writer.chunk_threshold = 16 * 1024  # many chunks, each holding a few messages
+    with AnyReader([plain]) as reader, writer:
+        out = {
+            c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+            for c in reader.connections
+        }
+        for connection, stamp, raw in reader.messages():
+            writer.write(out[connection.id], stamp, raw)
+    return path
+
+
+@pytest.mark.parametrize("compression", list(Writer1.CompressionFormat))
+def test_compressed_chunks_give_rosbags_messages(
+    tmp_path: Path, compression: Writer1.CompressionFormat
+) -> None:
+    """Decompressed one chunk ahead on a worker: every message, in order, and time windows."""
+    packed = _repacked(
+        _bag(tmp_path, "plain.bag", fmt="ros1"), tmp_path / "packed.bag", compression
+    )
+    with AnyReader([packed]) as reader:
+        assert len(reader.readers[0].chunks) > 5
+        for window in ({}, {"start": reader.start_time + 200_000_000, "stop": reader.end_time - 1}):
+            expected = [(c.id, t, bytes(raw)) for c, t, raw in reader.messages(**window)]
+            unpacked = mapped_messages(reader, reader.connections, **window)
+            assert unpacked is not None
+            got = [(c.id, t, bytes(raw)) for c, t, raw in unpacked]
+            assert len(got) == len(expected) > 12
+            assert got == expected
+        first = mapped_messages(reader, reader.connections)
+        assert first is not None
+        assert next(first)[1] == reader.start_time
+        first.close()  # a reader stopping early (the survey's) leaves no worker behind
+    for worker in [t for t in threading.enumerate() if t.name.startswith("unpack")]:
+        worker.join(timeout=5.0)  # it finishes the chunk under way, takes no other, and ends
+        assert not worker.is_alive()
+
+
+def test_ros2_bags_are_left_to_rosbags(tmp_path: Path) -> None:
+    with AnyReader([_bag(tmp_path, "ros2", fmt="ros2-mcap")]) as reader:
+        assert mapped_messages(reader, reader.connections) is None
 
 
 def test_frames_from_a_mapped_bag_match_a_compressed_copy(tmp_path: Path) -> None:
