@@ -77,7 +77,8 @@ def _unpacked(
     """The messages of compressed chunks: each chunk decompressed once, the next one meanwhile.
 
     Chunks are decompressed in the order the messages first need them, one ahead of the one
-    read, and let go after their last message (what was deserialized from one keeps it alive).
+    read once a second message is asked for, and let go after their last message (what was
+    deserialized from one keeps it alive).
     """
     order = list(dict.fromkeys(entry.chunk_pos for entry in entries))
     rank = {pos: k for k, pos in enumerate(order)}
@@ -91,7 +92,9 @@ def _unpacked(
     ready: dict[int, Future[memoryview]] = {}
     try:
         for k, entry in enumerate(entries):
-            for pos in order[rank[entry.chunk_pos] : rank[entry.chunk_pos] + 2]:
+            # The next chunk from the second message on: a reader after one (the survey's
+            # ``first``) does not set a chunk decompressing for nothing.
+            for pos in order[rank[entry.chunk_pos] : rank[entry.chunk_pos] + (2 if k else 1)]:
                 if pos not in ready and last[pos] >= k:
                     ready[pos] = worker.submit(unpack, pos)
             conn, data = _message_at(ready[entry.chunk_pos].result(), entry.offset)
