@@ -110,6 +110,21 @@ def test_a_damaged_message_position_is_one_readable_error(tmp_path: Path) -> Non
             list(source.frames())
 
 
+def test_a_damaged_compressed_chunk_is_one_readable_error(tmp_path: Path) -> None:
+    """The worker's failure reaches the reader as the bag's error, not a thread's traceback."""
+    bag = _bag(tmp_path, "packed.bag", fmt="ros1", compress=True)
+    with AnyReader([bag]) as reader:
+        chunk = max(reader.readers[0].chunks.values(), key=lambda c: c.datapos)
+    data = bytearray(bag.read_bytes())
+    for i in range(chunk.datapos + 40, chunk.datapos + 240):
+        data[i] ^= 0x5A
+    bag.write_bytes(bytes(data))
+    with BagFile(bag) as opened:
+        topic = opened.topics["/camera/depth/points"]
+        with pytest.raises(PlayerError, match=r"cannot read bag .*packed\.bag.*LZ4"):
+            list(opened.messages([topic], mapped=True))
+
+
 def _survey(bag: Path) -> tuple[str, ...]:
     """What the player's first pass found: tf, the odometry and its stamps, the first cloud."""
     with BagFile(bag) as opened:
