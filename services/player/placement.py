@@ -106,10 +106,15 @@ class Placement:
         ]
 
     def describe(self) -> str:
-        """One line for people: the level found and the band."""
+        """One line for people: the level found, the band, and whether rows are left unread."""
         parts = [self.level.describe()] if self.level is not None else []
         if self.band is not None:
             parts.append(f"the sensor sees {self.band[0]:.2f}-{self.band[1]:.2f} m above the floor")
+            parts.append(
+                "a pinhole: the rows that cannot see the band are not read"
+                if self.rays is not None
+                else "no pinhole fits its points: every searched row is read"
+            )
         return "; ".join(parts)
 
 

@@ -790,12 +790,14 @@ def test_the_rows_that_cannot_see_the_band_are_not_read(tmp_path: Path) -> None:
     how = RowSelection()
     with BagSource(bag) as source:
         assert source.placement.rays is not None, "a generated camera is a pinhole"
+        assert "rows that cannot see the band are not read" in source.placement.describe()
         read: list[slice] = []
         decode = source._decode
         source._decode = lambda msg, rows: read.append(rows) or decode(msg, rows)
         pruned = [frame for frame, _ in source.frames(how)]
         source._decode = decode
         source.placement = dataclasses.replace(source.placement, rays=None)
+        assert "every searched row is read" in source.placement.describe()
         every = [frame for frame, _ in source.frames(how)]
     searched = len(range(120)[rows_to_search(how, 120)])
     assert len(read) == len(pruned) == len(every) == 8
