@@ -79,6 +79,40 @@ def test_compressed_chunks_give_rosbags_messages(
         assert not worker.is_alive()
 
 
+def _file_backed_mb() -> float:
+    """This process's resident pages that are a file's (a mapped bag's among them), MB."""
+    status = Path("/proc/self/status").read_text(encoding="utf-8")
+    return (
+        int(next(line for line in status.splitlines() if line.startswith("RssFile:")).split()[1])
+        / 1024
+    )
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
+def test_pages_read_do_not_stay_in_the_player(tmp_path: Path) -> None:
+    """Each message's pages are let go once it is read: the resident set stays flat."""
+    bag = tmp_path / "big.bag"
+    write_scene_bag(
+        bag,
+        seed=9,
+        n_frames=24,
+        sensor="pointcloud",
+        camera=Camera(320, 240),
+        fmt="ros1",
+    )
+    with AnyReader([bag]) as reader:
+        clouds = [c for c in reader.connections if c.topic == "/camera/depth/points"]
+        before = _file_backed_mb()
+        pages = 0
+        for _, _, raw in mapped_messages(reader, clouds) or ():
+            every_page = np.frombuffer(raw, dtype=np.uint8)[::4096]
+            every_page.copy()  # a byte of every page read, as a whole cloud's decoding reads it
+            pages += every_page.size
+        grown = _file_backed_mb() - before
+    assert pages > 10_000  # 24 clouds of 2.4 MB
+    assert grown < 8, f"{grown:.0f} MB of the bag stayed resident"
+
+
 def test_ros2_bags_are_left_to_rosbags(tmp_path: Path) -> None:
     with AnyReader([_bag(tmp_path, "ros2", fmt="ros2-mcap")]) as reader:
         assert mapped_messages(reader, reader.connections) is None
