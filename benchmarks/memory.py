@@ -2,9 +2,11 @@
 
 Several generated scenes are played one after the other into the same router, mapper and
 detector (one drive is too short to show growth); each process's resident set size is sampled
-every 0.2 s. Flat means the peak stays near the level reached after the first bag.
+every 0.2 s. Flat means the peak stays near the level reached after the first bag. Then one
+player plays one long 640x480 cloud bag (gigabytes, read through its memory map): the pages it
+reads must not stay in its resident set.
 
-    .venv/bin/python benchmarks/memory.py [--bags 4] [--frames 600]
+    .venv/bin/python benchmarks/memory.py [--bags 4] [--frames 600] [--cloud-frames 300]
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import threading
 from pathlib import Path
 
 from wallmap.launcher import free_loopback_port
-from wallmap.scene import write_scene_bag
+from wallmap.scene import Camera, write_scene_bag
 
 
 def rss_mb(pid: int) -> float:
@@ -41,6 +43,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bags", type=int, default=4, help="scenes played one after the other")
     parser.add_argument("--frames", type=int, default=600)
+    parser.add_argument("--cloud-frames", type=int, default=300, help="the long cloud bag's")
     args = parser.parse_args()
     endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
     wallmap = [sys.executable, "-m", "wallmap"]
@@ -65,6 +68,14 @@ def main() -> None:
         sampler = threading.Thread(target=sample, args=(pids, series, stop), daemon=True)
         sampler.start()
         frames = 0
+        cloud = write_scene_bag(
+            Path(tmp) / "cloud.bag",
+            seed=7,
+            n_frames=args.cloud_frames,
+            fmt="ros1",
+            sensor="pointcloud",
+            camera=Camera(width=640, height=480),
+        ).path
         try:
             for i, bag in enumerate(bags):
                 player = subprocess.Popen(
@@ -75,6 +86,7 @@ def main() -> None:
                 frames += args.frames
                 if i == 0:
                     after_first = {n: s[-1] for n, s in series.items() if s}
+            long_play = play_one(cloud, zenoh, pids, series)
         finally:
             stop.set()
             sampler.join()
@@ -88,6 +100,30 @@ def main() -> None:
         if alive:
             first = after_first.get(name, alive[0])
             print(f"{name:<9} {first:>12.1f} {max(alive):>8.1f} {alive[-1]:>11.1f}")
+    half, peak, end = long_play
+    print(f"\none player, {args.cloud_frames} frames of 640x480 clouds in one bag, RSS in MB")
+    print(f"{'half way':>9} {'peak':>8} {'at the end':>11}")
+    print(f"{half:>9.1f} {peak:>8.1f} {end:>11.1f}")
+
+
+def play_one(
+    bag: Path, zenoh: list[str], pids: dict[str, int], series: dict[str, list[float]]
+) -> tuple[float, float, float]:
+    """The player's RSS over one bag: half way through its samples, at its peak, and last.
+
+    Sampled into a list of its own, put in the sampler's way for the while: the table above is
+    of the depth bags' players.
+    """
+    depth_players, series["player"] = series["player"], []
+    player = subprocess.Popen(
+        [sys.executable, "-m", "wallmap", "player", str(bag), "--fast", *zenoh],
+        stdout=subprocess.PIPE,
+    )
+    pids["player"] = player.pid
+    player.wait()
+    samples, series["player"] = series["player"], depth_players
+    alive = [v for v in samples if v > 0]
+    return alive[len(alive) // 2], max(alive), alive[-1]
 
 
 if __name__ == "__main__":
