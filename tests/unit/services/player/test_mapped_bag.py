@@ -20,9 +20,11 @@ from wallmap.services.player.mapped_bag import mapped_messages
 CAMERA = Camera(width=32, height=24)
 
 
-def _bag(tmp_path: Path, name: str, **kwargs: object) -> Path:
+def _bag(
+    tmp_path: Path, name: str, *, frames: int = 12, camera: Camera = CAMERA, **kwargs: object
+) -> Path:
     path = tmp_path / name
-    write_scene_bag(path, seed=9, n_frames=12, sensor="pointcloud", camera=CAMERA, **kwargs)
+    write_scene_bag(path, seed=9, n_frames=frames, sensor="pointcloud", camera=camera, **kwargs)
     return path
 
 
@@ -91,15 +93,7 @@ def _file_backed_mb() -> float:
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
 def test_pages_read_do_not_stay_in_the_player(tmp_path: Path) -> None:
     """Each message's pages are let go once it is read: the resident set stays flat."""
-    bag = tmp_path / "big.bag"
-    write_scene_bag(
-        bag,
-        seed=9,
-        n_frames=24,
-        sensor="pointcloud",
-        camera=Camera(320, 240),
-        fmt="ros1",
-    )
+    bag = _bag(tmp_path, "big.bag", frames=24, camera=Camera(320, 240), fmt="ros1")
     with AnyReader([bag]) as reader:
         clouds = [c for c in reader.connections if c.topic == "/camera/depth/points"]
         before = _file_backed_mb()
