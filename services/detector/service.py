@@ -27,7 +27,13 @@ from wallmap.common.delivery import (
 from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.messages import Frame, Observations, pack
 from wallmap.common.ransac import RowReport
-from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.runtime import (
+    Presence,
+    Stats,
+    drain,
+    exempt_startup_objects,
+    setup_logging,
+)
 from wallmap.common.transport import Keys, open_session
 from wallmap.services.detector.detector import DetectorConfig, WallDetector
 
@@ -70,6 +76,7 @@ def run(
         token = Presence(session, keys, "detector", stats)
         answers = threading.Thread(target=_answer_rows, args=(rows.handler, config), daemon=True)
         answers.start()
+        exempt_startup_objects()
         log.info("ready: %s -> %s (rows: %s)", keys.frames, keys.observations, config.rows)
         stop.wait()
         log.info("stopping: %s", stats.snapshot())

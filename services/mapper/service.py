@@ -24,7 +24,13 @@ from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.map_query import MapQuery
 from wallmap.common.map_requests import answer_map_queries
 from wallmap.common.messages import pack
-from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.runtime import (
+    Presence,
+    Stats,
+    drain,
+    exempt_startup_objects,
+    setup_logging,
+)
 from wallmap.common.transport import Keys, open_session
 from wallmap.services.mapper import ros2_out, serving
 from wallmap.services.mapper.core import MapperCore
@@ -110,6 +116,7 @@ def run(
         for worker in workers:
             worker.start()
         token = Presence(session, keys, "mapper", stats, lambda: _details(core))
+        exempt_startup_objects()
         log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
         while not stop.wait(mapper.save_every):
             save(core, mapper.state, config)

@@ -33,7 +33,7 @@ from wallmap.common.map_requests import (
     fetch_rooms,
     reply_in_format,
 )
-from wallmap.common.runtime import Presence, Stats, drain, setup_logging
+from wallmap.common.runtime import Presence, Stats, drain, exempt_startup_objects, setup_logging
 from wallmap.common.transport import Keys, key_expression, open_session
 from wallmap.services.mapper.ros2_out import RoomMarkers, Ros2Outlet
 from wallmap.services.merge.fleet import Fleet
@@ -81,6 +81,7 @@ def run(settings: ZenohSettings, robots: list[str], stop: threading.Event) -> St
         ]
         for thread in answering:
             thread.start()
+        exempt_startup_objects()
         log.info("ready: %s -> %s", ", ".join(robots), keys.map_walls)
         _work(session, fleet, served, spoke, (updates, rooms_updates), ros2, stats, stop)
         log.info("stopping: %s", stats.snapshot())

@@ -21,7 +21,7 @@ from wallmap.common.delivery import declare_history_publisher, received_frames
 from wallmap.common.link_settings import HistorySettings, ZenohSettings
 from wallmap.common.map_requests import MalformedReplyError, QueryError, fetch_map
 from wallmap.common.messages import pack
-from wallmap.common.runtime import Presence, Stats, setup_logging
+from wallmap.common.runtime import Presence, Stats, exempt_startup_objects, setup_logging
 from wallmap.common.scan_row import RowSelection, finite_scan
 from wallmap.common.transport import Keys, open_session
 from wallmap.services.odometry.tracker import OdometryConfig, PoseTracker
@@ -75,6 +75,7 @@ def run(
             daemon=True,
         )
         worker.start()
+        exempt_startup_objects()
         log.info(
             "ready: %s -> %s (walls as landmarks: %s)",
             keys.frames,

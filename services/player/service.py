@@ -30,7 +30,7 @@ from wallmap.common.codec import encode
 from wallmap.common.delivery import AckWindow, declare_history_publisher
 from wallmap.common.link_settings import MAX_RATE, HistorySettings, ZenohSettings
 from wallmap.common.messages import pack
-from wallmap.common.runtime import drain, setup_logging
+from wallmap.common.runtime import drain, exempt_startup_objects, setup_logging
 from wallmap.common.scan_row import RowSelection
 from wallmap.common.transport import Keys, make_config, open_session
 from wallmap.services.detector_rows import ask_rows
@@ -334,6 +334,7 @@ def run(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
             )
             answering.start()
+            exempt_startup_objects()
             start_wall = time.monotonic()
             with terminal_keys(playback, stop) as interactive:
                 if interactive:

@@ -29,7 +29,7 @@ from wallmap.common.link_settings import MAX_RATE, HistorySettings, ZenohSetting
 from wallmap.common.messages import Pose, pack
 from wallmap.common.ros2_types import deserialize_cdr
 from wallmap.common.ros_poses import ODOMETRY_TYPE, POSE_TYPES
-from wallmap.common.runtime import Presence, Stats, setup_logging
+from wallmap.common.runtime import Presence, Stats, exempt_startup_objects, setup_logging
 from wallmap.common.transport import Keys, open_session
 from wallmap.services.detector_rows import ask_rows
 from wallmap.services.mapper.pose_input import TF_TYPE
@@ -134,6 +134,7 @@ def run(
         for reply in session.get(subscriptions["tf_static"][0], timeout=2.0):
             if reply.ok is not None:
                 intake.handler("tf_static")(reply.ok)
+        exempt_startup_objects()
         log.info(
             "ready: %s -> %s, %s (poses from %s)",
             ", ".join(key for key, _ in subscriptions.values()),

@@ -61,3 +61,22 @@ def test_a_thread_that_dies_stops_the_service_and_is_remembered() -> None:
     assert done.stdout.split("\n")[0] == "True ['ZeroDivisionError']"
     assert "worker died; the service stops" in done.stderr
     assert "ZeroDivisionError" in done.stderr, "its traceback is logged"
+
+
+def test_startup_objects_leave_the_full_collections_and_startup_garbage_goes_first() -> None:
+    # In a process of its own: freezing is for the whole interpreter.
+    code = """
+import gc, weakref
+from wallmap.common.runtime import exempt_startup_objects
+class Node: pass
+kept = [[k] for k in range(50_000)]
+cycle = Node(); cycle.me = cycle; gone = weakref.ref(cycle); del cycle
+gc.disable()  # no collection of its own between the lines below
+exempt_startup_objects()
+assert gone() is None, "start-up's garbage was frozen with the rest"
+assert gc.get_freeze_count() > len(kept), gc.get_freeze_count()
+assert len(gc.get_objects(generation=2)) < 1000, len(gc.get_objects(generation=2))
+print("ok")
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.stdout.strip() == "ok", done.stderr
