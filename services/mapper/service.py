@@ -65,6 +65,7 @@ def _load_ahead(log: logging.Logger, ros2: bool) -> None:
         )
     if ros2:
         ros2_out.warm_up()
+    exempt_startup_objects()  # what is loaded by now lives as long as the mapper
 
 
 def run(
@@ -116,7 +117,6 @@ def run(
         for worker in workers:
             worker.start()
         token = Presence(session, keys, "mapper", stats, lambda: _details(core))
-        exempt_startup_objects()
         log.info("ready: poses from %s, observations from %s", pose_key, keys.observations)
         while not stop.wait(mapper.save_every):
             save(core, mapper.state, config)
