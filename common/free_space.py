@@ -7,10 +7,11 @@ end, and the robot stands on free floor wherever it is. Rays are sampled every h
 a ray crossing a cell counts about twice in it; a cell is free at ``MIN_FREE`` counts, about
 two rays or one pass of the robot: one stray return through a crack does not make a room.
 
-Frames are drawn in batches (``add_frames``): one count of all their samples, a few hundredths
-of a millisecond a frame, where drawing each alone cost ten times more. The grid grows as the
-map does (a building is not known in advance) and saturates its counts at 255. Pure numpy, no
-Zenoh, so the mapper and the offline runner share it.
+Frames are drawn in batches (``add_frames``), their samples counted by a compiled loop where
+they are made (``room_kernels.count_samples``, the cells numpy's arithmetic gives): 0.04-0.06
+ms a drawn frame of the 320x240 depth bag, where making every sample in numpy and counting
+them took 0.33 ms. The grid grows as the map does (a building is not known in advance) and
+saturates its counts at 255. No Zenoh, so the mapper and the offline runner share it.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from wallmap.common import se2
+from wallmap.common import compiled, se2
 
 Array = NDArray[np.float64]
 
@@ -52,34 +53,49 @@ class FreeSpace:
         self.add_frames([(pose, origin, ends)])
 
     def add_frames(self, frames: Sequence[tuple[Array, Array | None, Array | None]]) -> None:
-        """Frames' poses and free rays (as ``add_rays``), counted together."""
-        points = [self._samples(np.asarray(p, dtype=float), o, e) for p, o, e in frames]
-        if points:
-            self.add_points(np.concatenate(points))
+        """Frames' poses and free rays (as ``add_rays``), counted together.
+
+        Two passes of the compiled loops over the samples, none of them held: the cells they
+        reach (the grid grows to hold them), then their counts.
+        """
+        if not frames:
+            return
+        rays = [self._rays(np.asarray(p, dtype=float), o, e) for p, o, e in frames]
+        starts = np.array([start for start, _, _ in rays], dtype=np.float64).reshape(-1, 2)
+        units = np.concatenate([unit for _, unit, _ in rays]).reshape(-1, 2)
+        usable = np.concatenate([length for _, _, length in rays])
+        firsts = np.cumsum([0] + [len(length) for _, _, length in rays], dtype=np.int64)
+        disc = compiled.plain(_disc_offsets(self.cell), np.float64)  # a copy: it is read-only
+        sampled = (starts, units, usable, firsts, disc)
+        kernels, step = compiled.room_kernels(), 0.5 * self.cell
+        (low, high) = kernels.sample_bounds(*sampled, step, self.cell)
+        self._cover(low, high)
+        kernels.count_samples(self.counts, self.origin, *sampled, step, self.cell)
 
     def add_robot(self, position: Array) -> None:
         """The floor the robot stands on at ``position`` (x, y)."""
         self.add_points(self._disc(np.asarray(position, dtype=float)))
 
-    def _samples(self, pose: Array, origin: Array | None, ends: Array | None) -> Array:
-        """Points every half cell along each ray, short of its end, and the robot's disc."""
+    def _rays(
+        self, pose: Array, origin: Array | None, ends: Array | None
+    ) -> tuple[Array, Array, Array]:
+        """Where the sensor is, and the unit direction and usable length of each ray.
+
+        A ray is sampled every half cell short of its end (``RAY_SHORT``); one too short for
+        that, and a frame without rays, leaves the robot's disc around the sensor only.
+        """
         rot = se2.rotation(float(pose[2]))
         start = pose[:2] + (rot @ np.asarray(origin, dtype=float) if origin is not None else 0.0)
+        none = (start, np.empty((0, 2)), np.empty(0))
         if ends is None or not len(ends):
-            return self._disc(start)
+            return none
         rays = pose[:2] + np.asarray(ends, dtype=float).reshape(-1, 2) @ rot.T - start
         length = np.hypot(rays[:, 0], rays[:, 1])
         usable = length - RAY_SHORT
         keep = usable > 0
         if not keep.any():
-            return self._disc(start)
-        rays, length, usable = rays[keep], length[keep], usable[keep]
-        step = 0.5 * self.cell
-        along = np.arange(int(np.ceil(usable.max() / step)) + 1)[None, :] * step
-        inside = along <= usable[:, None]
-        unit = rays / length[:, None]
-        points = start + along[..., None] * unit[:, None, :]
-        return np.concatenate([points[inside], self._disc(start)])
+            return none
+        return start, rays[keep] / length[keep][:, None], usable[keep]
 
     def _disc(self, centre: Array) -> Array:
         return centre + _disc_offsets(self.cell)

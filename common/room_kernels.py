@@ -248,6 +248,78 @@ def nearest_ahead(
     return out
 
 
+@njit(cache=True, nogil=True)
+def _cell(coordinate: float, cell: float) -> int:
+    """The index of the cell holding ``coordinate``, as ``np.floor(x / cell)`` gives it."""
+    return math.floor(coordinate / cell)
+
+
+@njit(cache=True, nogil=True)
+def sample_bounds(
+    starts: Array,
+    units: Array,
+    usable: Array,
+    firsts: NDArray[np.int64],
+    disc: Array,
+    step: float,
+    cell: float,
+) -> NDArray[np.int64]:
+    """The lowest and highest cells (2, 2) that ``count_samples`` will count in.
+
+    Frame ``f``'s rays are ``units[firsts[f]:firsts[f + 1]]`` from ``starts[f]``, sampled
+    every ``step`` up to their ``usable`` length; each frame also counts its robot's ``disc``.
+    """
+    bounds = np.empty((2, 2), dtype=np.int64)
+    bounds[0, :] = np.iinfo(np.int64).max
+    bounds[1, :] = np.iinfo(np.int64).min
+    for f in range(starts.shape[0]):
+        for k in range(firsts[f], firsts[f + 1]):
+            n = 0
+            while float(n) * step <= usable[k]:
+                for axis in range(2):
+                    c = _cell(starts[f, axis] + float(n) * step * units[k, axis], cell)
+                    bounds[0, axis] = min(bounds[0, axis], c)
+                    bounds[1, axis] = max(bounds[1, axis], c)
+                n += 1
+        for d in range(disc.shape[0]):
+            for axis in range(2):
+                c = _cell(starts[f, axis] + disc[d, axis], cell)
+                bounds[0, axis] = min(bounds[0, axis], c)
+                bounds[1, axis] = max(bounds[1, axis], c)
+    return bounds
+
+
+@njit(cache=True, nogil=True)
+def count_samples(
+    counts: NDArray[np.uint8],
+    origin: NDArray[np.int64],
+    starts: Array,
+    units: Array,
+    usable: Array,
+    firsts: NDArray[np.int64],
+    disc: Array,
+    step: float,
+    cell: float,
+) -> None:
+    """One count (saturating at 255) per sample of ``sample_bounds``' rays and discs.
+
+    ``counts[i, j]`` is cell ``origin + (i, j)``; the grid holds every sample (see
+    ``sample_bounds``). A sample's cell is worked out as numpy would, term for term.
+    """
+    for f in range(starts.shape[0]):
+        for k in range(firsts[f], firsts[f + 1]):
+            n = 0
+            while float(n) * step <= usable[k]:
+                i = _cell(starts[f, 0] + float(n) * step * units[k, 0], cell) - origin[0]
+                j = _cell(starts[f, 1] + float(n) * step * units[k, 1], cell) - origin[1]
+                counts[i, j] = min(counts[i, j] + 1, 255)
+                n += 1
+        for d in range(disc.shape[0]):
+            i = _cell(starts[f, 0] + disc[d, 0], cell) - origin[0]
+            j = _cell(starts[f, 1] + disc[d, 1], cell) - origin[1]
+            counts[i, j] = min(counts[i, j] + 1, 255)
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel now, not at the first update."""
     mask = np.ones((3, 3), dtype=np.bool_)
@@ -261,3 +333,8 @@ def warm_up() -> None:
     near_pairs(point, point, point)
     one = np.zeros(1, dtype=np.int64)
     nearest_ahead(one, point, point, one, point, point, 1.0, 0.5)
+    firsts, usable, counts = np.zeros(2, dtype=np.int64), np.zeros(1), np.zeros((3, 3), np.uint8)
+    sample_bounds(point, point, usable, firsts, point, 0.05, 0.1)
+    count_samples(
+        counts, np.zeros(2, dtype=np.int64), point, point, usable, firsts, point, 0.05, 0.1
+    )
