@@ -84,8 +84,8 @@ def main() -> None:
                 pids["player"] = player.pid
                 player.wait()
                 frames += args.frames
-                if i == 0:
-                    after_first = {n: s[-1] for n, s in series.items() if s}
+                if i == 0:  # the last sample of each while alive (a player's ends at 0)
+                    after_first = {n: v[-1] for n, s in series.items() if (v := _alive(s))}
             long_play = play_one(cloud, zenoh, pids, series)
         finally:
             stop.set()
@@ -96,8 +96,7 @@ def main() -> None:
     print(f"{frames} frames in {len(bags)} bags, RSS in MB")
     print(f"{'service':<9} {'after bag 1':>12} {'peak':>8} {'at the end':>11}")
     for name, samples in series.items():
-        alive = [v for v in samples if v > 0]
-        if alive:
+        if alive := _alive(samples):
             first = after_first.get(name, alive[0])
             print(f"{name:<9} {first:>12.1f} {max(alive):>8.1f} {alive[-1]:>11.1f}")
     half, peak, end = long_play
@@ -122,8 +121,13 @@ def play_one(
     pids["player"] = player.pid
     player.wait()
     samples, series["player"] = series["player"], depth_players
-    alive = [v for v in samples if v > 0]
+    alive = _alive(samples)
     return alive[len(alive) // 2], max(alive), alive[-1]
+
+
+def _alive(samples: list[float]) -> list[float]:
+    """The samples taken while the process lived (``rss_mb`` gives 0 once it has exited)."""
+    return [v for v in samples if v > 0]
 
 
 if __name__ == "__main__":
