@@ -324,6 +324,7 @@ def run(
             rows = None if player.whole_clouds or sensor == "scan" else ask_rows(session, keys)
             if loading is not None:
                 loading.join()
+            exempt_startup_objects()  # the bag's index and tf among them: they stay till the end
             log.info(
                 "sending %s", "whole clouds" if rows is None else f"one row per frame ({rows})"
             )
@@ -334,7 +335,6 @@ def run(
                 target=_control, args=(control.handler, playback, outlet.state), daemon=True
             )
             answering.start()
-            exempt_startup_objects()
             start_wall = time.monotonic()
             with terminal_keys(playback, stop) as interactive:
                 if interactive:
