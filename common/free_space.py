@@ -53,11 +53,7 @@ class FreeSpace:
         self.add_frames([(pose, origin, ends)])
 
     def add_frames(self, frames: Sequence[tuple[Array, Array | None, Array | None]]) -> None:
-        """Frames' poses and free rays (as ``add_rays``), counted together.
-
-        Two passes of the compiled loops over the samples, none of them held: the cells they
-        reach (the grid grows to hold them), then their counts.
-        """
+        """Frames' poses and free rays (as ``add_rays``), counted together."""
         if not frames:
             return
         rays = [self._rays(np.asarray(p, dtype=float), o, e) for p, o, e in frames]
@@ -66,11 +62,14 @@ class FreeSpace:
         usable = np.concatenate([length for _, _, length in rays])
         firsts = np.cumsum([0] + [len(length) for _, _, length in rays], dtype=np.int64)
         disc = compiled.plain(_disc_offsets(self.cell), np.float64)  # a copy: it is read-only
-        sampled = (starts, units, usable, firsts, disc)
-        kernels, step = compiled.room_kernels(), 0.5 * self.cell
-        (low, high) = kernels.sample_bounds(*sampled, step, self.cell)
+        # Two passes over the samples, none of them kept: the cells they reach (the grid grows
+        # to hold them), then their counts. 0.04-0.06 ms a drawn depth frame; 0.2 when the
+        # cells were made in one pass and counted by numpy, 0.33 when numpy made the samples.
+        sampled = (starts, units, usable, firsts, disc, 0.5 * self.cell, self.cell)
+        kernels = compiled.room_kernels()
+        low, high = kernels.sample_bounds(sampled)
         self._cover(low, high)
-        kernels.count_samples(self.counts, self.origin, *sampled, step, self.cell)
+        kernels.count_samples(self.counts, self.origin, sampled)
 
     def add_robot(self, position: Array) -> None:
         """The floor the robot stands on at ``position`` (x, y)."""
@@ -102,12 +101,14 @@ class FreeSpace:
 
     def add_points(self, points: Array) -> None:
         """One count per point (n, 2) in the cell it falls in, saturating at 255."""
-        if not len(points):
-            return
-        cells = np.floor(points / self.cell).astype(np.int64)
+        if len(points):
+            self._count(np.floor(points / self.cell).astype(np.int64))
+
+    def _count(self, cells: NDArray[np.int64]) -> None:
+        """One count per cell index (n, 2), saturating at 255; the grid grows to hold them."""
         low, high = cells.min(axis=0), cells.max(axis=0)
         self._cover(low, high)
-        # Counted over the points' own box of the grid, not all of it: a frame or two at a time.
+        # Counted over the cells' own box of the grid, not all of it: a frame or two at a time.
         i, j = (cells - low).T
         shape = tuple((high - low + 1).tolist())
         added = np.bincount(i * shape[1] + j, minlength=shape[0] * shape[1]).reshape(shape)
