@@ -303,6 +303,7 @@ def _visit(
     origin: NDArray[np.int64],
     bounds: NDArray[np.int64],
 ) -> None:
+    """One sample in cell (i, j): counted, or taken into ``bounds`` (see ``_visit_samples``)."""
     if counting:
         counts[i - origin[0], j - origin[1]] = min(counts[i - origin[0], j - origin[1]] + 1, 255)
     else:
