@@ -14,6 +14,7 @@ import threading
 
 import zenoh
 
+from wallmap.common import compiled
 from wallmap.common.codec import encode_as
 from wallmap.common.map_requests import reply_in_format
 from wallmap.common.runtime import Stats, drain
@@ -75,6 +76,10 @@ class RoomsServer:
                 self._markers.undeclare()
 
     def _keep_current(self, stop: threading.Event) -> None:
+        # The rooms' compiled loops, loaded as the worker starts (0.05 s, before frames come as
+        # a rule): else the first to draw the floor loads them, and that may be a state save,
+        # which holds the map's lock while frames wait.
+        compiled.room_kernels().warm_up()
         # A big building takes a while to segment: at most a tenth of the time is spent on it,
         # so the frames, which share the interpreter, keep going. Frames coming faster than any
         # sensor gives them (a recording played --fast) are left to go first, up to MAX_DEFER:

@@ -55,7 +55,7 @@ def _load_ahead(log: logging.Logger, ros2: bool) -> None:
     Its frame path's compiled loops (the pose judge's, the map's) and, publishing to ROS 2,
     the typestore and its serializers: loaded at first use, numba's import and cache and
     rosbags' typestore (some tenths of a second of CPU each) fell among a recording's first
-    frames and slowed them. The rooms' loops load with the rooms' first segmentation, off the
+    frames and slowed them. The rooms' loops load on the rooms' worker as it starts, off the
     frame path (``compiled.compile_mapper``).
     """
     if (readied := compiled.compile_mapper()).compiled:
