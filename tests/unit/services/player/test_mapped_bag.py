@@ -158,7 +158,7 @@ def test_a_damaged_compressed_chunk_is_one_readable_error(tmp_path: Path) -> Non
         data[i] ^= 0x5A
     bag.write_bytes(bytes(data))
     with BagFile(bag) as opened:
-        topic = opened.topics["/camera/depth/points"]
+        topic = opened.topics[CLOUD_TOPIC]
         with pytest.raises(PlayerError, match=r"cannot read bag .*packed\.bag.*LZ4"):
             list(opened.messages([topic], mapped=True))
 
@@ -168,7 +168,7 @@ def _survey(bag: Path) -> tuple[str, ...]:
     with BagFile(bag) as opened:
         contents = read_contents(opened)
     assert contents.poses["/odom"], "the scene has odometry"
-    first = contents.firsts["/camera/depth/points"]
+    first = contents.firsts[CLOUD_TOPIC]
     assert first is not None
     return (
         repr(contents.tf_links),
