@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Self
 
 from wallmap.common.ros2_types import ros2_typestore
 from wallmap.services.player.errors import PlayerError
+from wallmap.services.player.lz4_chunks import Reveal, deserialize_head
 from wallmap.services.player.mapped_bag import mapped_messages
 
 if TYPE_CHECKING:
@@ -179,27 +180,75 @@ class BagFile:
         Args:
             topics: The topics to read.
             mapped: Read a ROS 1 bag as views over the mapped file, or over its chunks
-                decompressed one ahead on a worker (see ``mapped_bag``): for large clouds of
-                which only some rows are read, and for small messages (tf, poses) among them,
-                whose chunks rosbags reads whole.
+                decompressed as far as read (LZ4) or one ahead on a worker (bz2; see
+                ``mapped_bag``): for large clouds of which only some rows are read, and for
+                small messages (tf, poses) among them, whose chunks rosbags reads whole.
             start: Bag time (ns) of the first message kept.
             stop: Bag time (ns) before which messages are kept.
 
         Raises:
             PlayerError: A damaged chunk or message (damage surfaces as assorted library errors).
         """
+        for connection, receive_ns, msg, _ in self._read(topics, mapped, start, stop):
+            yield connection.topic, receive_ns, msg
+
+    def sensor_messages(
+        self, topic: Topic, *, start: int | None = None, stop: int | None = None
+    ) -> Iterator[tuple[int, Any, Reveal]]:
+        """(receive time ns, message, reveal) of a sensor topic, its data read as it is revealed.
+
+        Of an LZ4 bag, only each message's head is decompressed before it is handed out, and
+        ``reveal(n)`` decompresses the first ``n`` bytes of its ``data`` (``lz4_chunks``): a
+        frame reads the rows it searches, not the cloud. Of any other bag the message is read
+        as ``messages(mapped=True)`` reads it, and ``reveal`` does nothing. ``start`` and
+        ``stop`` are those of ``messages``.
+
+        Raises:
+            PlayerError: A damaged chunk or message, here or when revealing.
+        """
+        for _, receive_ns, msg, reveal in self._read([topic], True, start, stop, heads=True):
+            yield receive_ns, msg, self._reporting(reveal)
+
+    def _read(
+        self,
+        topics: Iterable[Topic],
+        mapped: bool,
+        start: int | None,
+        stop: int | None,
+        *,
+        heads: bool = False,
+    ) -> Iterator[tuple[Connection, int, Any, Reveal]]:
+        """``messages``' and ``sensor_messages``' reading; ``heads``: theirs alone, if LZ4."""
         connections = [c for topic in topics for c in topic.connections]
         if not connections:
             return
+        ids = frozenset(c.id for c in connections) if heads else frozenset()
         try:
-            raws = mapped_messages(self.reader, connections, start, stop) if mapped else None
+            raws = (
+                mapped_messages(self.reader, connections, start, stop, heads=ids)
+                if mapped
+                else None
+            )
             if raws is None:
                 raws = self.reader.messages(connections=connections, start=start, stop=stop)
             for connection, receive_ns, raw in raws:
-                msg = self.reader.deserialize(raw, connection.msgtype)
-                yield connection.topic, receive_ns, msg
+                msg, reveal = deserialize_head(
+                    raw, lambda raw, t=connection.msgtype: self.reader.deserialize(raw, t)
+                )
+                yield connection, receive_ns, msg, reveal
         except Exception as err:
             raise _unreadable(self.path, err) from err
+
+    def _reporting(self, reveal: Reveal) -> Reveal:
+        """``reveal``, failing as the bag's one-line error."""
+
+        def reported(count: int) -> None:
+            try:
+                reveal(count)
+            except Exception as err:
+                raise _unreadable(self.path, err) from err
+
+        return reported
 
     def first(
         self,

@@ -22,6 +22,7 @@ from wallmap.services.player.depth import depth_image_to_xyz
 from wallmap.services.player.errors import PlayerError, Refusal, decided
 from wallmap.services.player.frames import ClosingSource, SensorFrame, hand_out
 from wallmap.services.player.laserscan import beam_times, deskew, laserscan_to_xyz
+from wallmap.services.player.lz4_chunks import Reveal
 from wallmap.services.player.placement import SURVEY_FRAMES, Placement
 from wallmap.services.player.pointcloud import invalid_to_nan, pointcloud2_xyz
 
@@ -64,6 +65,23 @@ def read_survey_frames(bag: BagFile, sensor: SensorChoice) -> list[SurveyFrame]:
         stamp = header_stamp(msg.header, receive_ns)
         frames.append(SurveyFrame(stamp, normalize_frame(msg.header.frame_id), points))
     return frames
+
+
+def _revealed(msg: Any, rows: slice, reveal: Reveal) -> slice:
+    """``rows``, once the part of the message's data they lie in is readable (``Reveal``).
+
+    An image's or organized cloud's rows are ``row_step`` (a cloud) or ``step`` (an image)
+    bytes each; any other message is revealed whole.
+    """
+    data = getattr(msg, "data", None)
+    if data is None:
+        return rows
+    height = int(getattr(msg, "height", 1))
+    step = int(getattr(msg, "row_step", getattr(msg, "step", 0)))
+    picked = range(height)[rows]
+    whole = len(data)
+    reveal(min((max(picked) + 1) * step, whole) if picked and step > 0 and height > 1 else whole)
+    return rows
 
 
 class BagFrames(ClosingSource):
@@ -153,15 +171,15 @@ class BagFrames(ClosingSource):
             "stop": None if stop is None else begin + round(stop * 1e9),
         }
         topic = self._bag.topics[self.sensor_topic]
-        messages = self._bag.messages([topic], mapped=True, **window)
-        for index, (_, receive_ns, msg) in enumerate(messages):
+        messages = self._bag.sensor_messages(topic, **window)
+        for index, (receive_ns, msg, reveal) in enumerate(messages):
             stamp = header_stamp(msg.header, receive_ns)
             frame_id = normalize_frame(msg.header.frame_id)
             try:
                 mount = self._mount(frame_id, stamp)
                 pose, mount = self.placement.place(self.pose_at(stamp), mount)
                 points, stacked = hand_out(  # a LaserScan has no height: it is one row
-                    lambda rows_read, m=msg: self._decode(m, rows_read),
+                    lambda rows_read, m=msg, r=reveal: self._decode(m, _revealed(m, rows_read, r)),
                     getattr(msg, "height", 1),
                     rows,
                     mount,

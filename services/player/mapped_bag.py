@@ -3,10 +3,11 @@
 rosbags reads a whole chunk into memory and copies each message out of it: every byte is copied
 twice, 2.3 ms for one 640x480 cloud (10 MB) here. The player needs only the image rows the
 detector searches, so for an uncompressed bag it maps the file and hands rosbags' deserializer a
-view: only the pages under those rows are ever read. A compressed chunk (LZ4, bz2) must be
-decompressed whole, but once: its messages are views over it, and the next chunk is decompressed
-meanwhile on a worker thread (both decompressors let go of the interpreter), so a player no
-longer decompresses, copies and decodes one frame after the other on one core. rosbags' own
+view: only the pages under those rows are ever read. An LZ4 chunk is decompressed only as far
+as it is read (``lz4_chunks``). A bz2 chunk must be decompressed whole, but once: its messages
+are views over it, and the next chunk is decompressed meanwhile on a worker thread (the
+decompressor lets go of the interpreter), so a player no longer decompresses, copies and
+decodes one frame after the other on one core. rosbags' own
 index (the chunk and message positions it parsed when it opened the bag) says where each message
 lies, and rosbags still deserializes it; ROS 2 bags go through rosbags' reader.
 """
@@ -19,8 +20,8 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
-from wallmap.services.player.errors import PlayerError
-from wallmap.services.player.ros1_records import OP_CONNECTION, OP_MSGDATA, UINT32, record_header
+from wallmap.services.player.lz4_chunks import lazy_messages
+from wallmap.services.player.ros1_records import message_at
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -35,11 +36,15 @@ def mapped_messages(
     connections: Sequence[Connection],
     start: int | None = None,
     stop: int | None = None,
+    *,
+    heads: frozenset[int] = frozenset(),
 ) -> Iterator[Raw] | None:
     """(connection, stamp ns, raw message view) in time order, or None for bags it cannot read.
 
     Only a single ROS 1 bag qualifies; the caller then reads with rosbags. As with rosbags,
-    ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``.
+    ``start`` and ``stop`` (ns) keep the messages with ``start <= time < stop``. ``heads``: ids
+    of connections whose messages an LZ4 bag may hand out read only as far as their head, for
+    the caller to read more of as it needs (``lz4_chunks.deserialize_head``).
     """
     # Imported here: the bag's reader has loaded them, and a process that reads no bag (the
     # mapper, whose configuration names the player's settings) need not.
@@ -59,8 +64,11 @@ def mapped_messages(
     # Not closed here: deserialized messages are views into it, and it goes when they do.
     by_id = {c.id: c for c in connections}
     plain = decompressors["none"]
-    if all(bag.chunks[entry.chunk_pos].decompressor is plain for entry in entries):
+    kinds = {bag.chunks[entry.chunk_pos].decompressor for entry in entries}
+    if kinds <= {plain}:
         return _mapped(mapped, bag.chunks, entries, by_id)
+    if kinds == {decompressors["lz4"]}:
+        return lazy_messages(mapped, bag.chunks, entries, by_id, heads, _ReadPages(mapped).let_go)
     return _unpacked(mapped, bag.chunks, entries, by_id)
 
 
@@ -71,7 +79,7 @@ def _mapped(
     read = _ReadPages(mapped)
     for entry in entries:
         pos = chunks[entry.chunk_pos].datapos + entry.offset
-        conn, start, end = _message_at(view, pos)
+        conn, start, end = message_at(view, pos)
         yield by_id[conn], entry.time, view[start:end]
         read.let_go(pos, end)
 
@@ -112,7 +120,7 @@ class _ReadPages:
 def _unpacked(
     mapped: mmap.mmap, chunks: dict[int, Any], entries: list[Any], by_id: dict[int, Connection]
 ) -> Iterator[Raw]:
-    """The messages of compressed chunks: each chunk decompressed once, the next one meanwhile.
+    """The messages of bz2 chunks (or mixed kinds): each decompressed once, the next meanwhile.
 
     Chunks are decompressed in the order the messages first need them, one ahead of the one
     read once a second message is asked for, and let go after their last message (what was
@@ -143,28 +151,9 @@ def _unpacked(
                 if pos not in ready and last[pos] >= k:
                     ready[pos] = worker.submit(unpack, pos)
             unpacked = ready[entry.chunk_pos].result()
-            conn, start, end = _message_at(unpacked, entry.offset)
+            conn, start, end = message_at(unpacked, entry.offset)
             if last[entry.chunk_pos] == k:
                 del ready[entry.chunk_pos]
             yield by_id[conn], entry.time, unpacked[start:end]
     finally:  # a reader that stopped early (the survey's first frame) waits for no chunk
         worker.shutdown(wait=False, cancel_futures=True)
-
-
-def _message_at(view: memoryview, pos: int) -> tuple[int, int, int]:
-    """The message at ``pos``: its connection id, and where its data starts and ends.
-
-    Connection records before it are skipped, as rosbags also allows.
-    """
-    while True:
-        fields, pos = record_header(view, pos)
-        (size,) = UINT32.unpack_from(view, pos)
-        pos += 4
-        if fields.get("op") != OP_CONNECTION:
-            break
-        pos += size
-    if fields.get("op") != OP_MSGDATA or pos + size > len(view):
-        msg = f"no message data where the bag's index points (byte {pos})"
-        raise PlayerError(msg)
-    (conn,) = UINT32.unpack(fields["conn"])
-    return conn, pos, pos + size

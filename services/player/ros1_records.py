@@ -8,6 +8,7 @@ Both read it here, as strictly as rosbags does, so a malformed header is one rea
 """
 
 import struct
+from collections.abc import Callable
 
 from wallmap.services.player.errors import PlayerError
 
@@ -46,6 +47,35 @@ def record_header(data: bytes | memoryview, pos: int) -> tuple[dict[str, bytes],
         fields[name.decode("ascii", "replace")] = value
         pos += 4 + size
     return fields, end
+
+
+def message_at(
+    view: memoryview, pos: int, fill: Callable[[int], None] | None = None
+) -> tuple[int, int, int]:
+    """The message record at ``pos`` of a chunk: its connection id, where its data starts, ends.
+
+    Connection records before it are skipped, as rosbags also allows. ``fill(n)``, if given, is
+    called before the first ``n`` bytes of ``view`` are read (a chunk decompressed as read).
+
+    Raises:
+        PlayerError: No message record where the bag's index points.
+    """
+    while True:
+        if fill is not None:  # the header's length, then the header and the data's length
+            fill(pos + 4)
+            length = _length(view, pos, len(view))
+            fill(pos + 8 + (length or 0))
+        fields, pos = record_header(view, pos)
+        (size,) = UINT32.unpack_from(view, pos)
+        pos += 4
+        if fields.get("op") != OP_CONNECTION:
+            break
+        pos += size
+    if fields.get("op") != OP_MSGDATA or pos + size > len(view):
+        msg = f"no message data where the bag's index points (byte {pos})"
+        raise PlayerError(msg)
+    (conn,) = UINT32.unpack(fields["conn"])
+    return conn, pos, pos + size
 
 
 def _length(data: bytes | memoryview, pos: int, limit: int) -> int | None:

@@ -93,16 +93,28 @@ def _file_backed_mb() -> float:
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's /proc")
 @pytest.mark.parametrize(
-    ("topics", "share"), [("clouds", 1.0), ("clouds", 0.25), ("all", 1.0), ("all", 0.25)]
+    ("topics", "share", "compress"),
+    [
+        ("clouds", 1.0, False),
+        ("clouds", 0.25, False),
+        ("all", 1.0, False),
+        ("all", 0.25, False),
+        ("all", 1.0, True),
+    ],
 )
-def test_pages_read_do_not_stay_in_the_player(tmp_path: Path, topics: str, share: float) -> None:
+def test_pages_read_do_not_stay_in_the_player(
+    tmp_path: Path, topics: str, share: float, compress: bool
+) -> None:
     """Pages are let go as reading goes on: the resident set stays flat.
 
     ``share``: the leading part of each message read, as the player reads only the rows that
     can see the band. Every topic at once reads the small messages stamped after a cloud but
     written before it after the cloud; the kernel maps a large folio around each page read.
+    ``compress``: LZ4 chunks, their compressed pages read as they are decompressed.
     """
-    bag = _bag(tmp_path, "big.bag", frames=48, camera=Camera(320, 240), fmt="ros1")
+    bag = _bag(
+        tmp_path, "big.bag", frames=48, camera=Camera(320, 240), fmt="ros1", compress=compress
+    )
     with AnyReader([bag]) as reader:
         read = [c for c in reader.connections if topics == "all" or c.topic == CLOUD_TOPIC]
         before = _file_backed_mb()
