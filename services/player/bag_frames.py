@@ -80,7 +80,8 @@ def _revealed(msg: Any, rows: slice, reveal: Reveal) -> slice:
     step = int(getattr(msg, "row_step", getattr(msg, "step", 0)))
     picked = range(height)[rows]
     whole = len(data)
-    reveal(min((max(picked) + 1) * step, whole) if picked and step > 0 and height > 1 else whole)
+    last = max(picked[0], picked[-1]) if picked else 0  # a range's ends: max() would walk it
+    reveal(min((last + 1) * step, whole) if picked and step > 0 and height > 1 else whole)
     return rows
 
 
