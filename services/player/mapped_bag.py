@@ -3,13 +3,13 @@
 rosbags reads a whole chunk into memory and copies each message out of it: every byte is copied
 twice, 2.3 ms for one 640x480 cloud (10 MB) here. The player needs only the image rows the
 detector searches, so for an uncompressed bag it maps the file and hands rosbags' deserializer a
-view: only the pages under those rows are ever read. An LZ4 chunk is decompressed only as far
-as it is read (``lz4_chunks``). A bz2 chunk must be decompressed whole, but once: its messages
-are views over it, and the next chunk is decompressed meanwhile on a worker thread (the
-decompressor lets go of the interpreter), so a player no longer decompresses, copies and
-decodes one frame after the other on one core. rosbags' own
-index (the chunk and message positions it parsed when it opened the bag) says where each message
-lies, and rosbags still deserializes it; ROS 2 bags go through rosbags' reader.
+view: only the pages under those rows are ever read. An LZ4 chunk is decompressed only as far as
+it is read (``lz4_chunks``). A bz2 chunk must be decompressed whole, but once: its messages are
+views over it, and the next chunk is decompressed meanwhile on a worker thread (the decompressor
+lets go of the interpreter), so a player no longer decompresses, copies and decodes one frame
+after the other on one core. rosbags' own index (the chunk and message positions it parsed when
+it opened the bag) says where each message lies, and rosbags still deserializes it; ROS 2 bags
+go through rosbags' reader.
 """
 
 from __future__ import annotations
