@@ -86,7 +86,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=90)
     parser.add_argument("--repeats", type=int, default=3, help="runs of each, medians reported")
     parser.add_argument(
-        "--compress", action="store_true", help="an LZ4 bag: the player reads it through rosbags"
+        "--compress", action="store_true", help="an LZ4 bag (the player decompresses what it reads)"
     )
     args = parser.parse_args()
     floors: list[float] = []

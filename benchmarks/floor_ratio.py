@@ -1,4 +1,7 @@
-"""End to end against the read floor on the three kinds of bag issue 26 names, several runs.
+"""End to end against the read floor on the kinds of bag issue 26 names, several runs.
+
+The issue's three bags, and its ROS 1 cloud bag again with LZ4 chunks, as ROS 1's recorder
+writes them with ``--lz4``.
 
 Each bag goes through router, player (`--fast`), detector and mapper as separate processes (and
 the odometry service for the lidar bag, which has no poses: its scans make them), against the
@@ -41,24 +44,33 @@ def write_depth_bag(path: Path, frames: int = 784) -> Path:
     return path
 
 
-def bags(folder: Path, scale: float) -> dict[str, tuple[Path, str, bool]]:
-    """The three bags: name -> (path, sensor message type, poses by odometry)."""
-    cloud, depth, lidar = folder / "cloud.bag", folder / "depth", folder / "lidar.bag"
+def _write_cloud_bag(path: Path, frames: int, *, compress: bool) -> Path:
+    """The issue's ROS 1 bag: a generated scene's 640x480 clouds at 30 Hz."""
     write_scene_bag(
-        cloud,
+        path,
         seed=7,
-        n_frames=round(450 * scale),
+        n_frames=frames,
         fmt="ros1",
         sensor="pointcloud",
         camera=Camera(width=640, height=480),
         rate_hz=30.0,
+        compress=compress,
     )
-    write_depth_bag(depth, round(784 * scale))
+    return path
+
+
+def bags(folder: Path, scale: float) -> dict[str, tuple[Path, str, bool]]:
+    """The bags: name -> (path, sensor message type, poses by odometry)."""
+    clouds = round(450 * scale)
+    cloud = _write_cloud_bag(folder / "cloud.bag", clouds, compress=False)
+    packed = _write_cloud_bag(folder / "cloud_lz4.bag", clouds, compress=True)
+    depth, lidar = write_depth_bag(folder / "depth", round(784 * scale)), folder / "lidar.bag"
     write_scene_bag(
         lidar, seed=7, n_frames=round(1000 * scale), fmt="ros1", sensor="laserscan", rate_hz=15.0
     )
     return {
         "ROS 1, 640x480 PointCloud2": (cloud, CLOUD, False),
+        "...the same, LZ4 chunks": (packed, CLOUD, False),
         "ROS 2 mcap, 320x240 depth 16UC1": (depth, IMAGE, False),
         "ROS 1, 2-D lidar, --odometry": (lidar, SCAN, True),
     }
