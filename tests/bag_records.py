@@ -21,11 +21,20 @@ class Record:
 
 
 def write_records(
-    path: Path, store: Typestore, records: list[Record], plugin: StoragePlugin | None = None
+    path: Path,
+    store: Typestore,
+    records: list[Record],
+    plugin: StoragePlugin | None = None,
+    compression: Writer1.CompressionFormat | None = None,
 ) -> Path:
-    """Write records (in the given order) to a ROS 1 bag, or a ROS 2 bag with ``plugin``."""
+    """Write records (in the given order) to a ROS 1 bag, or a ROS 2 bag with ``plugin``.
+
+    ``compression``: a ROS 1 bag's chunks compressed so (uncompressed by default).
+    """
     if plugin is None:
         writer: Writer1 | Writer2 = Writer1(path)
+        if compression is not None:
+            writer.set_compression(compression)
         serialize = store.serialize_ros1
     else:
         writer = Writer2(path, version=9, storage_plugin=plugin)

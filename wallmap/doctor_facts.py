@@ -246,6 +246,8 @@ class Report:
     Attributes:
         path: The bag as given.
         file: What the file itself says.
+        chunks: How a ROS 1 bag's chunks are compressed (``none``, ``lz4``, ``bz2``); None for
+            a ROS 2 bag, or one nothing reads.
         readable: Whether the player can read the bag at all.
         start: Receive time of the first message, seconds since the epoch.
         duration: Seconds from the first message to the last.
@@ -263,6 +265,7 @@ class Report:
 
     path: str
     file: FileFacts
+    chunks: str | None = None
     readable: bool = False
     start: float | None = None
     duration: float | None = None

@@ -65,7 +65,7 @@ def inspect_bag(
     file = file_facts(path)
     try:
         with BagFile(path) as bag:
-            report = Report(path=str(path), file=file)
+            report = Report(path=str(path), file=file, chunks=bag.chunk_compression)
             return _inspect(report, bag, sensor_topic, pose_source, (level, floor_z))
     except PlayerError as err:  # the player's reason: a file it cannot read, a damaged chunk
         return _refuse(Report(path=str(path), file=file), str(err))

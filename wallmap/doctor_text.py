@@ -42,6 +42,7 @@ MOST_WARNINGS = 3  # the player's warnings
 # then poses.
 TOPIC_RANKS = [{POINTCLOUD2, IMAGE, LASERSCAN, CAMERA_INFO}, TF_TYPES, {ODOMETRY_TYPE, *POSE_TYPES}]
 FORMAT_NAMES = {"ros1": "ROS 1 bag 2.0", "ros2-mcap": "ROS 2 mcap", "ros2-sqlite3": "ROS 2 sqlite3"}
+CHUNK_NAMES = {"none": "uncompressed", "lz4": "LZ4 chunks", "bz2": "bz2 chunks"}
 
 
 def _wrap(label: str, text: str) -> list[str]:
@@ -91,6 +92,8 @@ def _file(report: Report) -> list[str]:
     """The bag line: its path, format and size, and for a bag nothing reads what it still says."""
     file = report.file
     kind = FORMAT_NAMES.get(file.format or "", "not a bag format rosbags reads")
+    if report.readable and report.chunks is not None:
+        kind += ", " + CHUNK_NAMES.get(report.chunks, f"{report.chunks} chunks")
     facts = [f"{kind}, {_size(file.size)}"]
     if not report.readable and file.magic:  # what is left to say about a bag nothing reads
         facts[0] += f", magic {file.magic!r}"
@@ -98,6 +101,11 @@ def _file(report: Report) -> list[str]:
         began = datetime.fromtimestamp(report.start, UTC).strftime("%Y-%m-%d %H:%M")
         count = sum(t.count for t in report.topics)
         facts[0] += f", {report.duration:.1f} s from {began} UTC, {_plural(count, 'message')}"
+    if report.readable and "bz2" in (report.chunks or ""):
+        facts.append(
+            "bz2 chunks are decompressed whole, at tens of MB a second: with ROS 1, "
+            f"`rosbag decompress {report.path}` (or `rosbag compress --lz4`) plays it faster"
+        )
     header = file.ros1_header
     if not report.readable and header:
         facts.append(

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from bag_records import Record, write_records
 from conftest import real_bag
+from rosbags.rosbag1 import Writer as Writer1
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from wallmap.cli import main as wallmap_main
@@ -135,6 +136,11 @@ SCAN, TF, ODOM = "sensor_msgs/msg/LaserScan", "tf2_msgs/msg/TFMessage", "nav_msg
 def troubled_bag(path: Path) -> Path:
     """50 scans at 10 Hz whose header stamps step back once (at 2.0 s) and jump 1.6 s (at 3.9 s);
     tf map -> odom -> base_link only over 0-1.5 s and 3-4 s; /odom over the whole bag."""
+    return write_bag(path, troubled_bag_records())
+
+
+def troubled_bag_records() -> list[Record]:
+    """``troubled_bag``'s records, in receive-time order."""
     records = [Record("/tf_static", TF, tf(T0, ("base_link", "laser")), T0)]
     for i in range(50):
         stamp = T0 + 0.1 * i if i < 40 else T0 + 5.5 + 0.1 * (i - 40)
@@ -150,7 +156,7 @@ def troubled_bag(path: Path) -> Path:
     for i in range(70):
         stamp = T0 + 0.1 * i
         records.append(Record("/odom", ODOM, odometry(stamp), stamp + 0.01))
-    return write_bag(path, records)
+    return sorted(records, key=lambda r: r.receive)
 
 
 # --- the command --------------------------------------------------------------------------------
@@ -248,6 +254,35 @@ def test_real_damaged_index_keeps_its_bag_header(capsys: pytest.CaptureFixture[s
         "conn_count": 1,
         "index_pos": 1_029_025,
     }
+
+
+@pytest.mark.parametrize(
+    ("compression", "said"),
+    [(None, "uncompressed"), ("LZ4", "LZ4 chunks"), ("BZ2", "bz2 chunks")],
+)
+def test_the_bag_line_says_how_its_chunks_are_compressed(
+    compression: str | None, said: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """How fast the player reads a ROS 1 bag depends on it; a bz2 bag is told how to speed up."""
+    packing = None if compression is None else Writer1.CompressionFormat[compression]
+    path = write_records(tmp_path / "scans.bag", STORE, troubled_bag_records(), None, packing)
+    text = run(path, capsys=capsys)[1]
+    assert f"ROS 1 bag 2.0, {said}, " in text
+    assert ("rosbag decompress" in unwrapped(text)) is (compression == "BZ2")
+    facts = json.loads(run(path, "--json", capsys=capsys)[1])
+    assert facts["chunks"] == (compression or "none").lower()
+
+
+def test_a_ros2_bag_has_no_chunk_compression(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "scene"
+    write_scene_bag(path, seed=3, n_frames=4, fmt="ros2-mcap", sensor="laserscan")
+    line = run(path, capsys=capsys)[1].splitlines()[1]
+    assert "ROS 2 mcap, " in line
+    assert "chunks" not in line
+    assert "uncompressed" not in line
+    assert json.loads(run(path, "--json", capsys=capsys)[1])["chunks"] is None
 
 
 @pytest.mark.parametrize("damage", ["cut", "no-equals"])
