@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Self
 from wallmap.common.ros2_types import ros2_typestore
 from wallmap.services.player.errors import PlayerError
 from wallmap.services.player.lz4_chunks import Reveal, deserialize_head
-from wallmap.services.player.mapped_bag import mapped_messages
+from wallmap.services.player.mapped_bag import compression, mapped_messages
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -276,13 +276,11 @@ class BagFile:
         so.
         """
         from rosbags.rosbag1 import Reader as Reader1  # noqa: PLC0415 - loaded with the bag
-        from rosbags.rosbag1.reader import decompressors  # noqa: PLC0415 - loaded with the bag
 
         readers = self.reader.readers
         if not readers or not all(isinstance(r, Reader1) for r in readers):
             return None
-        names = {id(fn): name for name, fn in decompressors.items()}
-        used = {names.get(id(c.decompressor), "?") for r in readers for c in r.chunks.values()}
+        used = {compression(chunk) for r in readers for chunk in r.chunks.values()}
         return "+".join(sorted(used)) or "none"
 
     def close(self) -> None:

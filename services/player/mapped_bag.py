@@ -49,7 +49,6 @@ def mapped_messages(
     # Imported here: the bag's reader has loaded them, and a process that reads no bag (the
     # mapper, whose configuration names the player's settings) need not.
     from rosbags.rosbag1 import Reader as Reader1  # noqa: PLC0415 - see above
-    from rosbags.rosbag1.reader import decompressors  # noqa: PLC0415 - see above
 
     if len(reader.readers) != 1 or not isinstance(reader.readers[0], Reader1):
         return None
@@ -63,13 +62,19 @@ def mapped_messages(
         mapped = mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ)
     # Not closed here: deserialized messages are views into it, and it goes when they do.
     by_id = {c.id: c for c in connections}
-    plain = decompressors["none"]
-    kinds = {bag.chunks[entry.chunk_pos].decompressor for entry in entries}
-    if kinds <= {plain}:
+    kinds = {compression(bag.chunks[pos]) for pos in {entry.chunk_pos for entry in entries}}
+    if kinds <= {"none"}:
         return _mapped(mapped, bag.chunks, entries, by_id)
-    if kinds == {decompressors["lz4"]}:
+    if kinds == {"lz4"}:
         return lazy_messages(mapped, bag.chunks, entries, by_id, heads, _ReadPages(mapped).let_go)
     return _unpacked(mapped, bag.chunks, entries, by_id)
+
+
+def compression(chunk: Any) -> str:
+    """How one of rosbags' ROS 1 chunks is compressed: ``none``, ``lz4`` or ``bz2``."""
+    from rosbags.rosbag1.reader import decompressors  # noqa: PLC0415 - see mapped_messages
+
+    return next(name for name, fn in decompressors.items() if fn is chunk.decompressor)
 
 
 def _mapped(
