@@ -82,18 +82,6 @@ class LazyChunk(np.ndarray):
                 msg = f"an LZ4 chunk ends after {self.filled} of its {self.size} bytes"
                 raise PlayerError(msg)
 
-    def reveal(self, data: Any, raw_end: int) -> Reveal:
-        """The ``Reveal`` of a message's ``data`` array, deserialized from this chunk.
-
-        ``raw_end``: where the message ends in the chunk, filled in whole when ``data`` is not
-        a view into the chunk (a deserializer that copied it).
-        """
-        offset = _offset_in(data, self)
-        if offset is None:
-            self.fill(raw_end)
-            return _nothing
-        return lambda count: self.fill(offset + count)
-
 
 def _address(buffer: Any) -> int:
     """Where a buffer's bytes start in memory."""
@@ -184,9 +172,8 @@ def deserialize_head(
         msg = deserialize(raw)
     except Exception:  # a head longer than what is filled (see above)
         msg = None
-    data = getattr(msg, "data", None)
-    offset = None if data is None else _offset_in(data, chunk)
+    offset = _offset_in(getattr(msg, "data", None), chunk)  # None: no data array into the chunk
     if offset is None or offset > chunk.filled:
         chunk.fill(end)
         return deserialize(raw), _nothing
-    return msg, chunk.reveal(data, end)
+    return msg, lambda count: chunk.fill(offset + count)
